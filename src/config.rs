@@ -1,0 +1,378 @@
+//! TOML configuration and its validation.
+//!
+//! Every field, its unit and its default are documented in `config/default.toml`;
+//! the defaults in code below are the same values (a test keeps the two equal).
+//! Unknown keys are rejected, and a bad value stops start-up with the file, the
+//! dotted key and the reason.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+/// A configuration problem: which file, which key, why.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {key}: {reason}", file.display())]
+pub struct ConfigError {
+    pub file: PathBuf,
+    /// Dotted path of the offending key, e.g. `pipeline.diffusion_kappa_m`.
+    pub key: String,
+    pub reason: String,
+}
+
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    pub sources: SourcesConfig,
+    pub pipeline: PipelineConfig,
+    pub map: MapConfig,
+    pub zenoh: ZenohConfig,
+}
+
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SourcesConfig {
+    pub depth: DepthSourceConfig,
+    pub d435i: D435iConfig,
+    pub extrinsics: ExtrinsicsConfig,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DepthSourceKind {
+    /// Replays a sequence's depth at its frame rate, stamped on the live clock.
+    Mock,
+    /// Reads a sequence with its own stamps and poses (offline work).
+    Sequence,
+    /// The L515 through librealsense (needs the `realsense` feature).
+    Realsense,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DepthSourceConfig {
+    pub kind: DepthSourceKind,
+    /// Sequence directory for `mock` and `sequence`; relative paths are relative to the working directory.
+    pub sequence: PathBuf,
+    /// L515 serial number; empty = the only L515 present.
+    pub serial: String,
+    /// Depth profile, pixels and frames per second.
+    pub width: u32,
+    pub height: u32,
+    pub fps: u32,
+}
+
+impl Default for DepthSourceConfig {
+    fn default() -> Self {
+        DepthSourceConfig {
+            kind: DepthSourceKind::Mock,
+            sequence: PathBuf::from("mock_frames/straight_320"),
+            serial: String::new(),
+            width: 320,
+            height: 240,
+            fps: 30,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum D435iKind {
+    /// No IR/IMU streaming (VINS gets its images elsewhere).
+    None,
+    /// Synthetic IR images and IMU consistent with the mock camera's trajectory.
+    Mock,
+    /// The D435i through librealsense, IR emitter forced off.
+    Realsense,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct D435iConfig {
+    pub kind: D435iKind,
+    /// D435i serial number; empty = the only D435i present.
+    pub serial: String,
+    /// Infrared (infra1 + infra2, Y8) profile.
+    pub ir_width: u32,
+    pub ir_height: u32,
+    pub ir_fps: u32,
+    /// IMU rates, Hz (D435i: gyro 200 or 400, accel 63 or 250).
+    pub gyro_hz: u32,
+    pub accel_hz: u32,
+}
+
+impl Default for D435iConfig {
+    fn default() -> Self {
+        D435iConfig {
+            kind: D435iKind::None,
+            serial: String::new(),
+            ir_width: 640,
+            ir_height: 480,
+            ir_fps: 30,
+            gyro_hz: 200,
+            accel_hz: 250,
+        }
+    }
+}
+
+/// T_body_camera: the depth camera's optical frame in the odometry's body frame.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ExtrinsicsConfig {
+    /// Translation, m.
+    pub xyz: [f64; 3],
+    /// Rotation quaternion, x y z w (unit).
+    pub quat_xyzw: [f64; 4],
+}
+
+impl Default for ExtrinsicsConfig {
+    fn default() -> Self {
+        ExtrinsicsConfig { xyz: [0.0; 3], quat_xyzw: [0.0, 0.0, 0.0, 1.0] }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Backend {
+    /// The GPU when one is there and faster, else the CPU twin.
+    Auto,
+    Gpu,
+    Cpu,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PipelineConfig {
+    pub backend: Backend,
+    /// Perona-Malik iterations.
+    pub diffusion_iterations: u32,
+    /// Edge-stopping constant of c = exp(-(|grad|/kappa)^2), m.
+    pub diffusion_kappa_m: f64,
+    /// Step size per iteration (stable for <= 0.25 with 4 neighbours).
+    pub diffusion_gamma: f64,
+    /// Sobel kernel size for normals: 3, 5 or 7.
+    pub normal_kernel: u32,
+    /// Canny thresholds on the normal field's gradient, unitless (change of the unit normal per pixel).
+    pub canny_low: f64,
+    pub canny_high: f64,
+    /// A depth step between neighbours larger than this fraction of the depth is an edge too.
+    pub depth_edge_ratio: f64,
+    /// Side of the square morphological closing of the edge map, pixels (odd).
+    pub closing_kernel_px: u32,
+    /// Regions smaller than this on their fitted plane are dropped, m^2.
+    pub min_polygon_area_m2: f64,
+    /// Douglas-Peucker tolerance when simplifying contours, pixels.
+    pub simplify_tolerance_px: f64,
+    /// RANSAC hypotheses per polygon.
+    pub ransac_hypotheses: u32,
+    /// Point-to-plane distance that counts as an inlier, m.
+    pub ransac_inlier_distance_m: f64,
+    /// A polygon is kept when at least this fraction of its pixels are inliers.
+    pub ransac_min_inlier_ratio: f64,
+}
+
+impl Default for PipelineConfig {
+    fn default() -> Self {
+        PipelineConfig {
+            backend: Backend::Auto,
+            diffusion_iterations: 60,
+            diffusion_kappa_m: 0.0335,
+            diffusion_gamma: 0.2,
+            normal_kernel: 5,
+            canny_low: 0.1,
+            canny_high: 0.2,
+            depth_edge_ratio: 0.03,
+            closing_kernel_px: 13,
+            min_polygon_area_m2: 0.01,
+            simplify_tolerance_px: 1.5,
+            ransac_hypotheses: 20,
+            ransac_inlier_distance_m: 0.01,
+            ransac_min_inlier_ratio: 0.9,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MapConfig {
+    /// Largest height difference over the overlap for two polygons to merge (the drift tolerance), m.
+    pub merge_height_tolerance_m: f64,
+    /// Largest angle between normals for two polygons to merge, degrees.
+    pub merge_normal_tolerance_deg: f64,
+    /// Smallest overlap, as a fraction of the smaller footprint, for two polygons to match.
+    pub merge_min_overlap: f64,
+    /// Apply the vertical drift Kalman filter.
+    pub drift_filter: bool,
+    /// Process noise added to the drift variance each frame, m^2.
+    pub drift_sigma_p: f64,
+    /// Variance of one drift measurement, m^2.
+    pub drift_sigma_m: f64,
+    /// Planes within this angle of horizontal are horizontal (tread, floor, landing), degrees.
+    pub horizontal_max_tilt_deg: f64,
+    /// Planes tilted at least this much are vertical (riser, wall); in between is slope, degrees.
+    pub vertical_min_tilt_deg: f64,
+}
+
+impl Default for MapConfig {
+    fn default() -> Self {
+        MapConfig {
+            merge_height_tolerance_m: 0.05,
+            merge_normal_tolerance_deg: 10.0,
+            merge_min_overlap: 0.1,
+            drift_filter: true,
+            drift_sigma_p: 4e-5,
+            drift_sigma_m: 1e-4,
+            horizontal_max_tilt_deg: 25.0,
+            vertical_min_tilt_deg: 65.0,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ZenohConfig {
+    /// Zenoh JSON5 configuration file; empty = a peer on loopback-only defaults.
+    pub config_file: PathBuf,
+    /// Keys are published under `<key_prefix>/<robot>/`.
+    pub key_prefix: String,
+    pub robot: String,
+    /// Key expression of the VINS odometry (nav_msgs/Odometry, ROS 2 CDR).
+    pub pose_key: String,
+}
+
+impl Default for ZenohConfig {
+    fn default() -> Self {
+        ZenohConfig {
+            config_file: PathBuf::new(),
+            key_prefix: "polymap".into(),
+            robot: "leju".into(),
+            pose_key: "vins_estimator/odometry".into(),
+        }
+    }
+}
+
+impl Config {
+    /// Reads, parses and validates a config file.
+    pub fn load(path: impl AsRef<Path>) -> Result<Config, ConfigError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
+            file: path.to_owned(),
+            key: "(file)".into(),
+            reason: e.to_string(),
+        })?;
+        Config::parse(&text, path)
+    }
+
+    /// Parses and validates TOML text; `file` only names it in errors.
+    pub fn parse(text: &str, file: &Path) -> Result<Config, ConfigError> {
+        let fail = |key: String, reason: String| ConfigError { file: file.to_owned(), key, reason };
+        let de = toml::Deserializer::parse(text).map_err(|e| fail("(syntax)".into(), one_line(&e.to_string())))?;
+        let config: Config = serde_path_to_error::deserialize(de).map_err(|e| {
+            let key = e.path().to_string();
+            fail(if key == "." { "(top level)".into() } else { key }, one_line(&e.into_inner().to_string()))
+        })?;
+        config.validate().map_err(|(key, reason)| fail(key.into(), reason))?;
+        Ok(config)
+    }
+
+    /// The first impossible value, as (dotted key, reason).
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        let d = &self.sources.depth;
+        if d.kind != DepthSourceKind::Realsense && d.sequence.as_os_str().is_empty() {
+            return Err(("sources.depth.sequence", "a mock or sequence source needs a sequence directory".into()));
+        }
+        check_range("sources.depth.width", d.width as f64, 16.0, 4096.0)?;
+        check_range("sources.depth.height", d.height as f64, 16.0, 4096.0)?;
+        check_range("sources.depth.fps", d.fps as f64, 1.0, 1000.0)?;
+        let i = &self.sources.d435i;
+        check_range("sources.d435i.ir_width", i.ir_width as f64, 16.0, 4096.0)?;
+        check_range("sources.d435i.ir_height", i.ir_height as f64, 16.0, 4096.0)?;
+        check_range("sources.d435i.ir_fps", i.ir_fps as f64, 1.0, 1000.0)?;
+        check_range("sources.d435i.gyro_hz", i.gyro_hz as f64, 1.0, 2000.0)?;
+        check_range("sources.d435i.accel_hz", i.accel_hz as f64, 1.0, 2000.0)?;
+        let e = &self.sources.extrinsics;
+        if e.xyz.iter().any(|v| !v.is_finite()) {
+            return Err(("sources.extrinsics.xyz", format!("{:?} must be finite metres", e.xyz)));
+        }
+        let qn = e.quat_xyzw.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if !((qn - 1.0).abs() <= crate::sequence::QUATERNION_NORM_TOLERANCE) {
+            return Err((
+                "sources.extrinsics.quat_xyzw",
+                format!("norm {qn:.6}, a rotation quaternion must have norm 1"),
+            ));
+        }
+
+        let p = &self.pipeline;
+        check_range("pipeline.diffusion_iterations", p.diffusion_iterations as f64, 0.0, 1000.0)?;
+        check_positive("pipeline.diffusion_kappa_m", p.diffusion_kappa_m)?;
+        if !(p.diffusion_gamma > 0.0 && p.diffusion_gamma <= 0.25) {
+            return Err((
+                "pipeline.diffusion_gamma",
+                format!("{} must be in (0, 0.25]: larger steps make 4-neighbour diffusion unstable", p.diffusion_gamma),
+            ));
+        }
+        if ![3, 5, 7].contains(&p.normal_kernel) {
+            return Err(("pipeline.normal_kernel", format!("{} must be 3, 5 or 7", p.normal_kernel)));
+        }
+        check_positive("pipeline.canny_low", p.canny_low)?;
+        check_positive("pipeline.canny_high", p.canny_high)?;
+        if p.canny_low > p.canny_high {
+            return Err((
+                "pipeline.canny_low",
+                format!("{} must not exceed canny_high = {}", p.canny_low, p.canny_high),
+            ));
+        }
+        check_positive("pipeline.depth_edge_ratio", p.depth_edge_ratio)?;
+        if p.closing_kernel_px % 2 == 0 || p.closing_kernel_px > 63 {
+            return Err(("pipeline.closing_kernel_px", format!("{} must be odd and at most 63", p.closing_kernel_px)));
+        }
+        check_positive("pipeline.min_polygon_area_m2", p.min_polygon_area_m2)?;
+        check_positive("pipeline.simplify_tolerance_px", p.simplify_tolerance_px)?;
+        check_range("pipeline.ransac_hypotheses", p.ransac_hypotheses as f64, 1.0, 1024.0)?;
+        check_positive("pipeline.ransac_inlier_distance_m", p.ransac_inlier_distance_m)?;
+        check_range("pipeline.ransac_min_inlier_ratio", p.ransac_min_inlier_ratio, 0.0, 1.0)?;
+
+        let m = &self.map;
+        check_positive("map.merge_height_tolerance_m", m.merge_height_tolerance_m)?;
+        check_range("map.merge_normal_tolerance_deg", m.merge_normal_tolerance_deg, 0.0, 90.0)?;
+        check_range("map.merge_min_overlap", m.merge_min_overlap, 0.0, 1.0)?;
+        check_positive("map.drift_sigma_p", m.drift_sigma_p)?;
+        check_positive("map.drift_sigma_m", m.drift_sigma_m)?;
+        check_range("map.horizontal_max_tilt_deg", m.horizontal_max_tilt_deg, 0.0, 90.0)?;
+        check_range("map.vertical_min_tilt_deg", m.vertical_min_tilt_deg, 0.0, 90.0)?;
+        if m.horizontal_max_tilt_deg >= m.vertical_min_tilt_deg {
+            return Err((
+                "map.horizontal_max_tilt_deg",
+                format!(
+                    "{} must be below vertical_min_tilt_deg = {}",
+                    m.horizontal_max_tilt_deg, m.vertical_min_tilt_deg
+                ),
+            ));
+        }
+
+        let z = &self.zenoh;
+        for (key, v) in
+            [("zenoh.key_prefix", &z.key_prefix), ("zenoh.robot", &z.robot), ("zenoh.pose_key", &z.pose_key)]
+        {
+            if v.is_empty() || v.contains(['*', '$', '?', '#']) || v.starts_with('/') || v.ends_with('/') {
+                return Err((key, format!("{v:?} must be a non-empty key without wildcards or leading/trailing '/'")));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+fn check_positive(key: &'static str, v: f64) -> Result<(), (&'static str, String)> {
+    if v.is_finite() && v > 0.0 { Ok(()) } else { Err((key, format!("{v} must be a finite number above 0"))) }
+}
+
+fn check_range(key: &'static str, v: f64, lo: f64, hi: f64) -> Result<(), (&'static str, String)> {
+    if v.is_finite() && (lo..=hi).contains(&v) {
+        Ok(())
+    } else {
+        Err((key, format!("{v} must be within [{lo}, {hi}]")))
+    }
+}

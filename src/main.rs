@@ -1,0 +1,180 @@
+//! The polymap command line: a thin layer over the library.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use polymap::config::Config;
+use polymap::sequence::Sequence;
+use polymap::synth::{self, SceneKind, SynthOptions};
+use polymap::viz;
+
+#[derive(Parser)]
+#[command(name = "polymap", version, about = "Real-time polygonal terrain mapping for legged robots", long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Write a synthetic stair sequence (ray-cast L515-like depth, poses, truth, labels)
+    Synth {
+        /// Output sequence directory (created)
+        out: PathBuf,
+        #[arg(long, value_enum, default_value = "straight")]
+        scene: SceneKind,
+        /// Image width in pixels; height is 3/4 of it
+        #[arg(long, default_value_t = 320)]
+        width: u32,
+        #[arg(long, default_value_t = 30)]
+        frames: usize,
+        /// Range noise at 1 m, mm (0 = noise-free: no noise, mixed pixels or dropouts)
+        #[arg(long, default_value_t = 2.0)]
+        noise: f64,
+        /// Vertical drift added to the written poses, mm per frame
+        #[arg(long, default_value_t = 0.0)]
+        drift: f64,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Frame rate of the stamps, Hz
+        #[arg(long, default_value_t = 30.0)]
+        fps: f64,
+        /// Also write colour pictures of depth and labels to OUT/preview/
+        #[arg(long)]
+        preview: bool,
+    },
+    /// Check a sequence and summarise it; --preview writes colour pictures of its frames
+    Inspect {
+        seq: PathBuf,
+        /// Directory for one picture per frame: depth in colour, and truth labels if present
+        #[arg(long)]
+        preview: Option<PathBuf>,
+    },
+    /// Check a config file and print it with every default filled in
+    Config { file: PathBuf },
+}
+
+fn main() {
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
+        .with_writer(std::io::stderr)
+        .init();
+    if let Err(e) = run(Cli::parse()) {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Synth { out, scene, width, frames, noise, drift, seed, fps, preview } => {
+            let opts = SynthOptions { scene, width, frames, noise_mm: noise, drift_mm_per_frame: drift, seed, fps };
+            if let Some(p) = opts.problem() {
+                bail!("{p}");
+            }
+            let bar = progress(frames as u64, "synth");
+            synth::generate(&opts, &out, |_, _| bar.inc(1)).with_context(|| format!("writing {}", out.display()))?;
+            bar.finish_and_clear();
+            let seq = Sequence::open(&out).context("reading back what was written")?;
+            println!(
+                "{}: {} frames {}x{} of the {:?} scene",
+                out.display(),
+                seq.len(),
+                seq.intrinsics.width,
+                seq.intrinsics.height,
+                scene
+            );
+            if preview {
+                write_previews(&seq, &out.join("preview"))?;
+            }
+        }
+        Command::Inspect { seq, preview } => {
+            let s = Sequence::open(&seq)?;
+            summarise(&s)?;
+            if let Some(dir) = preview {
+                write_previews(&s, &dir)?;
+            }
+        }
+        Command::Config { file } => {
+            let config = Config::load(&file)?;
+            print!("{}", toml::to_string(&config)?);
+        }
+    }
+    Ok(())
+}
+
+fn progress(len: u64, what: &str) -> ProgressBar {
+    let bar = ProgressBar::new(len);
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} frames, {eta} left").expect("valid template"),
+    );
+    bar.set_message(what.to_string());
+    bar
+}
+
+fn summarise(s: &Sequence) -> Result<()> {
+    let i = &s.intrinsics;
+    let first = s.poses.first().map_or(0, |p| p.stamp_ns);
+    let last = s.poses.last().map_or(0, |p| p.stamp_ns);
+    let mut valid = 0usize;
+    for k in 0..s.len() {
+        valid += s.depth(k)?.pixels.iter().filter(|&&d| d != 0).count();
+    }
+    println!(
+        "{}: {} frames, {}x{}, fx {:.3} fy {:.3} cx {:.3} cy {:.3}, depth unit {} m",
+        s.dir.display(),
+        s.len(),
+        i.width,
+        i.height,
+        i.fx,
+        i.fy,
+        i.cx,
+        i.cy,
+        i.depth_scale
+    );
+    println!(
+        "  {:.3} s of stamps, {:.1} % of pixels valid",
+        (last - first) as f64 * 1e-9,
+        100.0 * valid as f64 / (s.len() * i.pixel_count()) as f64
+    );
+    match &s.truth {
+        Some(t) => println!(
+            "  truth: {} polygons{}, labels: {}",
+            t.polygons.len(),
+            t.stair
+                .as_ref()
+                .map(|st| format!(
+                    " ({} stair, {} steps, rise {} m, going {:.3} m)",
+                    st.kind, st.steps, st.rise, st.going
+                ))
+                .unwrap_or_default(),
+            if s.has_labels { "yes" } else { "no" }
+        ),
+        None => println!("  no truth"),
+    }
+    Ok(())
+}
+
+/// One PNG per frame: depth in colour, and beside it the truth labels if the sequence has them.
+fn write_previews(s: &Sequence, dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let i = &s.intrinsics;
+    let bar = progress(s.len() as u64, "preview");
+    for k in 0..s.len() {
+        let depth = s.depth(k)?;
+        let mut panels = vec![viz::depth_units_image(i.width, i.height, &depth.pixels, i.depth_scale)];
+        if s.has_labels {
+            let labels = s.labels(k)?;
+            panels.push(viz::label_image(i.width, i.height, &labels));
+        }
+        let refs: Vec<_> = panels.iter().collect();
+        let path = dir.join(format!("{k:06}.png"));
+        viz::side_by_side(&refs).save(&path).with_context(|| format!("writing {}", path.display()))?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    println!("previews in {}", dir.display());
+    Ok(())
+}
