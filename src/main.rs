@@ -6,6 +6,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use polymap::config::Config;
+use polymap::extract;
 use polymap::sequence::Sequence;
 use polymap::synth::{self, SceneKind, SynthOptions};
 use polymap::viz;
@@ -52,6 +53,24 @@ enum Command {
         #[arg(long)]
         preview: Option<PathBuf>,
     },
+    /// Extract one frame's planar polygons as JSON (camera frame, or world with --world)
+    Extract {
+        seq: PathBuf,
+        #[arg(long, default_value_t = 0)]
+        frame: usize,
+        /// Write the JSON here instead of to stdout
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Transform the polygons to the world frame with the frame's pose from poses.txt
+        #[arg(long)]
+        world: bool,
+        /// Write a picture of every stage into this directory
+        #[arg(long)]
+        debug: Option<PathBuf>,
+        /// Pipeline settings from this config file (default: the built-in defaults)
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
     /// Check a config file and print it with every default filled in
     Config { file: PathBuf },
 }
@@ -95,6 +114,37 @@ fn run(cli: Cli) -> Result<()> {
             summarise(&s)?;
             if let Some(dir) = preview {
                 write_previews(&s, &dir)?;
+            }
+        }
+        Command::Extract { seq, frame, out, world, debug, config } => {
+            let config = match config {
+                Some(f) => Config::load(f)?,
+                None => Config::default(),
+            };
+            let s = Sequence::open(&seq)?;
+            if frame >= s.len() {
+                bail!("--frame {frame}: {} has frames 0..{}", seq.display(), s.len());
+            }
+            let depth = s.depth(frame)?;
+            let (result, stages, times) = extract::extract_cpu(&depth, &s.intrinsics, &config.pipeline)?;
+            tracing::info!("frame {frame}: {} polygons in {:.1} ms", result.polygons.len(), times.total);
+            if let Some(dir) = &debug {
+                extract::debug::write_stage_images(dir, &stages, &result.polygons, &s.intrinsics)?;
+                println!("stage pictures in {}", dir.display());
+            }
+            let polygons: Vec<_> = if world {
+                result.polygons.iter().map(|p| p.transformed(&s.poses[frame].transform)).collect()
+            } else {
+                result.polygons
+            };
+            let json = serde_json::to_string_pretty(&serde_json::json!({
+                "frame": if world { "world" } else { "camera" },
+                "stamp_ns": result.stamp_ns,
+                "polygons": polygons,
+            }))?;
+            match out {
+                Some(path) => std::fs::write(&path, json).with_context(|| format!("writing {}", path.display()))?,
+                None => println!("{json}"),
             }
         }
         Command::Config { file } => {

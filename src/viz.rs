@@ -60,3 +60,35 @@ pub fn side_by_side(images: &[&RgbImage]) -> RgbImage {
     }
     out
 }
+
+/// Unit normals as colours ((n + 1) / 2 per channel), black where there is none.
+pub fn normal_image(width: u32, height: u32, normals: &[[f32; 3]]) -> RgbImage {
+    RgbImage::from_fn(width, height, |u, v| {
+        let n = normals[(v * width + u) as usize];
+        if n == [0.0; 3] {
+            return INVALID;
+        }
+        let c = |x: f32| ((x + 1.0) * 127.5).clamp(0.0, 255.0) as u8;
+        Rgb([c(n[0]), c(n[1]), c(n[2])])
+    })
+}
+
+/// A binary mask: white where set.
+pub fn mask_image(width: u32, height: u32, mask: &[u8]) -> RgbImage {
+    RgbImage::from_fn(width, height, |u, v| if mask[(v * width + u) as usize] != 0 { Rgb([255; 3]) } else { INVALID })
+}
+
+/// Draws a closed ring of pixel coordinates.
+pub fn draw_ring(img: &mut RgbImage, ring: &[(f32, f32)], colour: Rgb<u8>) {
+    for i in 0..ring.len() {
+        let (a, b) = (ring[i], ring[(i + 1) % ring.len()]);
+        imageproc::drawing::draw_line_segment_mut(img, a, b, colour);
+    }
+}
+
+/// Dims an image towards grey, to draw over it.
+pub fn dimmed(img: &RgbImage) -> RgbImage {
+    let mut out = img.clone();
+    out.pixels_mut().for_each(|p| p.0.iter_mut().for_each(|c| *c = (*c as u16 * 2 / 5 + 40) as u8));
+    out
+}

@@ -1,0 +1,214 @@
+//! Edges of the normal image: the CPU twin of the GPU stage shaders/canny.wgsl (the WGSL half lands with the GPU backend).
+//!
+//! Canny on a vector image: the gradient of the unit-normal field (3x3 Sobel per
+//! channel, in change of normal per pixel), its magnitude and Di Zenzo direction,
+//! non-maximum suppression along that direction, and hysteresis between the two
+//! thresholds. Depth discontinuities and pixels without a normal are edges too, and a
+//! morphological close joins broken edges. Directions are chosen by comparisons, not
+//! angles, so both twins pick the same neighbours.
+
+use rayon::prelude::*;
+
+use crate::extract::Grid;
+
+const SOBEL_S: [f32; 3] = [1.0, 2.0, 1.0];
+const SOBEL_D: [f32; 3] = [-1.0, 0.0, 1.0];
+
+/// Gradient of the normal field: (magnitude, NMS sector 0..4) per pixel; sector 4 marks
+/// a pixel whose 3x3 neighbourhood lacks a normal (magnitude 0 there).
+pub fn normal_gradient(normals: &Grid<[f32; 3]>) -> Grid<(f32, u8)> {
+    let (w, h) = (normals.width, normals.height);
+    let mut data = vec![(0.0f32, 4u8); w * h];
+    data.par_chunks_mut(w).enumerate().for_each(|(v, out)| {
+        if v == 0 || v + 1 >= h {
+            return;
+        }
+        'pixel: for u in 1..w.saturating_sub(1) {
+            let (mut gx, mut gy) = ([0.0f32; 3], [0.0f32; 3]);
+            for j in 0..3 {
+                for i in 0..3 {
+                    let n = normals.data[(v + j - 1) * w + u + i - 1];
+                    if n == [0.0; 3] {
+                        continue 'pixel;
+                    }
+                    for c in 0..3 {
+                        gx[c] += SOBEL_S[j] * SOBEL_D[i] * n[c];
+                        gy[c] += SOBEL_D[j] * SOBEL_S[i] * n[c];
+                    }
+                }
+            }
+            out[u] = gradient_sector(gx, gy);
+        }
+    });
+    Grid { width: w, height: h, data }
+}
+
+/// Magnitude and NMS sector (0: along u, 1: diagonal u+v, 2: along v, 3: diagonal u-v)
+/// from the per-channel Sobel sums.
+#[inline]
+pub fn gradient_sector(gx: [f32; 3], gy: [f32; 3]) -> (f32, u8) {
+    let dot = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    // Sobel 3x3 responds 8 to a unit ramp: divide to get change per pixel.
+    let (xx, yy, xy) = (dot(gx, gx) / 64.0, dot(gy, gy) / 64.0, dot(gx, gy) / 64.0);
+    let magnitude = (xx + yy).sqrt();
+    // Di Zenzo: the direction of largest change is at angle theta with
+    // tan(2 theta) = 2 xy / (xx - yy); sectors of theta by comparing a and b.
+    let (a, b) = (xx - yy, 2.0 * xy);
+    let sector = if a >= b.abs() {
+        0
+    } else if b >= a.abs() {
+        1
+    } else if -a >= b.abs() {
+        2
+    } else {
+        3
+    };
+    (magnitude, sector)
+}
+
+/// Offsets of the two neighbours compared in non-maximum suppression, by sector.
+pub const SECTOR_STEP: [(isize, isize); 4] = [(1, 0), (1, 1), (0, 1), (-1, 1)];
+
+/// Canny edges: 1 where the magnitude is a local maximum across the edge and joins a
+/// pixel at or above `high` through pixels at or above `low` (8-connected).
+pub fn canny(grad: &Grid<(f32, u8)>, low: f32, high: f32) -> Grid<u8> {
+    let (w, h) = (grad.width, grad.height);
+    // 0 = none, 1 = weak, 2 = strong.
+    let mut class = vec![0u8; w * h];
+    class.par_chunks_mut(w).enumerate().for_each(|(v, out)| {
+        for u in 0..w {
+            out[u] = suppressed_class(grad, u, v, low, high);
+        }
+    });
+    let mut edges = vec![0u8; w * h];
+    let mut stack: Vec<usize> = (0..w * h).filter(|&i| class[i] == 2).collect();
+    for &i in &stack {
+        edges[i] = 1;
+    }
+    while let Some(i) = stack.pop() {
+        let (u, v) = ((i % w) as isize, (i / w) as isize);
+        for dv in -1..=1 {
+            for du in -1..=1 {
+                let (nu, nv) = (u + du, v + dv);
+                if nu < 0 || nv < 0 || nu >= w as isize || nv >= h as isize {
+                    continue;
+                }
+                let j = nv as usize * w + nu as usize;
+                if class[j] == 1 && edges[j] == 0 {
+                    edges[j] = 1;
+                    stack.push(j);
+                }
+            }
+        }
+    }
+    Grid { width: w, height: h, data: edges }
+}
+
+/// 0, 1 (weak) or 2 (strong) for pixel (u, v) after non-maximum suppression.
+#[inline]
+pub fn suppressed_class(grad: &Grid<(f32, u8)>, u: usize, v: usize, low: f32, high: f32) -> u8 {
+    let (m, sector) = grad.data[v * grad.width + u];
+    if sector == 4 || m < low {
+        return 0;
+    }
+    let (du, dv) = SECTOR_STEP[sector as usize];
+    let at = |s: isize| {
+        let (nu, nv) = (u as isize + s * du, v as isize + s * dv);
+        if nu < 0 || nv < 0 || nu >= grad.width as isize || nv >= grad.height as isize {
+            0.0
+        } else {
+            grad.data[nv as usize * grad.width + nu as usize].0
+        }
+    };
+    if m > at(-1) && m >= at(1) { if m >= high { 2 } else { 1 } } else { 0 }
+}
+
+/// 1 where the pixel cannot be inside a planar region: the closed edge lines (Canny,
+/// and depth steps to a 4-neighbour larger than `ratio` times the depth), or no normal.
+/// Only the lines are closed: closing the no-normal specks of sensor dropouts would
+/// grow them into blobs that eat the surfaces around them.
+pub fn boundary(canny: &Grid<u8>, depth: &Grid<f32>, ratio: f32, normals: &Grid<[f32; 3]>, closing: u32) -> Grid<u8> {
+    let (w, h) = (depth.width, depth.height);
+    let mut lines = vec![0u8; w * h];
+    lines.par_chunks_mut(w).enumerate().for_each(|(v, out)| {
+        for u in 0..w {
+            let i = v * w + u;
+            let z = depth.data[i];
+            let jump = |j: usize| z != 0.0 && depth.data[j] != 0.0 && (depth.data[j] - z).abs() > ratio * z;
+            let step = (u > 0 && jump(i - 1))
+                || (u + 1 < w && jump(i + 1))
+                || (v > 0 && jump(i - w))
+                || (v + 1 < h && jump(i + w));
+            out[u] = (canny.data[i] != 0 || step) as u8;
+        }
+    });
+    let closed = close(&Grid { width: w, height: h, data: lines }, closing);
+    // Regions are 8-connected (as contour tracing sees them), so a thin diagonal line
+    // would leak: growing each line pixel into its 4-neighbours seals it.
+    let mut out = vec![0u8; w * h];
+    out.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
+        for u in 0..w {
+            let i = v * w + u;
+            let c = &closed.data;
+            let line = c[i] != 0
+                || (u > 0 && c[i - 1] != 0)
+                || (u + 1 < w && c[i + 1] != 0)
+                || (v > 0 && c[i - w] != 0)
+                || (v + 1 < h && c[i + w] != 0);
+            row[u] = (line || normals.data[i] == [0.0; 3]) as u8;
+        }
+    });
+    Grid { width: w, height: h, data: out }
+}
+
+/// Morphological close (dilate, then erode) with a `size` x `size` square; outside the
+/// image counts as edge, so closing never eats into the border.
+pub fn close(edges: &Grid<u8>, size: u32) -> Grid<u8> {
+    let r = (size / 2) as usize;
+    let dilated = dilate(edges, r, 1);
+    let inverted =
+        Grid { width: dilated.width, height: dilated.height, data: dilated.data.iter().map(|&e| 1 - e).collect() };
+    let eroded_inv = dilate(&inverted, r, 0);
+    Grid { width: edges.width, height: edges.height, data: eroded_inv.data.iter().map(|&e| 1 - e).collect() }
+}
+
+/// Binary dilation by a (2r+1)^2 square, separable: rows, then columns. `outside` is
+/// the value of pixels beyond the border.
+pub fn dilate(mask: &Grid<u8>, r: usize, outside: u8) -> Grid<u8> {
+    let (w, h) = (mask.width, mask.height);
+    let window_any = |get: &dyn Fn(isize) -> u8, len: usize, out: &mut dyn FnMut(usize, u8)| {
+        // Sliding count of set pixels in [i - r, i + r].
+        let mut count: usize = 0;
+        for k in -(r as isize)..=(r as isize) {
+            count += get(k) as usize;
+        }
+        for i in 0..len {
+            out(i, (count > 0) as u8);
+            count += get(i as isize + r as isize + 1) as usize;
+            count -= get(i as isize - r as isize) as usize;
+        }
+    };
+    let mut rows = vec![0u8; w * h];
+    rows.par_chunks_mut(w).enumerate().for_each(|(v, out)| {
+        let src = &mask.data[v * w..(v + 1) * w];
+        let get = |k: isize| if k < 0 || k >= w as isize { outside } else { src[k as usize] };
+        window_any(&get, w, &mut |i, x| out[i] = x);
+    });
+    let mut data = vec![0u8; w * h];
+    // Columns: process in column-major order of a transposed pass for simplicity.
+    let cols: Vec<Vec<u8>> = (0..w)
+        .into_par_iter()
+        .map(|u| {
+            let get = |k: isize| if k < 0 || k >= h as isize { outside } else { rows[k as usize * w + u] };
+            let mut col = vec![0u8; h];
+            window_any(&get, h, &mut |i, x| col[i] = x);
+            col
+        })
+        .collect();
+    for (u, col) in cols.into_iter().enumerate() {
+        for (v, x) in col.into_iter().enumerate() {
+            data[v * w + u] = x;
+        }
+    }
+    Grid { width: w, height: h, data }
+}

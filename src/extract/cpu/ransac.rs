@@ -1,0 +1,146 @@
+//! Batched RANSAC plane fits for all of a frame's regions at once: the CPU twin of
+//! shaders/ransac.wgsl (the WGSL half lands with the GPU backend), then a least-squares refit on the inliers.
+//!
+//! Points of every region sit in one flat array with a range per region (the layout
+//! the GPU dispatch uses). Hypothesis h of region r samples its three points with
+//! the same integer hash on both twins, and scores on the same strided subset.
+
+use std::ops::Range;
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use rayon::prelude::*;
+
+/// At most this many points (evenly strided) score each hypothesis.
+pub const MAX_SCORE_POINTS: usize = 2048;
+
+/// All regions' camera-frame points, region r being `points[ranges[r]]`.
+#[derive(Clone, Debug, Default)]
+pub struct PointBatch {
+    pub points: Vec<[f32; 3]>,
+    pub ranges: Vec<Range<usize>>,
+}
+
+/// A fitted plane n . p + d = 0 (n faces the camera, so d > 0) and its support.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlaneFit {
+    pub normal: Vector3<f64>,
+    pub offset: f64,
+    /// Points within the inlier distance of the refitted plane.
+    pub inliers: usize,
+    pub points: usize,
+    /// RMS distance of the inliers to the plane, m.
+    pub rms: f64,
+}
+
+impl PlaneFit {
+    pub fn inlier_ratio(&self) -> f64 {
+        self.inliers as f64 / self.points.max(1) as f64
+    }
+}
+
+/// lowbias32 (Chris Wellons): a well-mixed 32-bit hash, plain u32 arithmetic that WGSL has too.
+#[inline]
+pub fn hash(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^ (x >> 16)
+}
+
+/// Index (within its region of `n` points) of sample j of hypothesis h of region r.
+#[inline]
+pub fn sample_index(region: u32, hypothesis: u32, j: u32, n: u32) -> u32 {
+    hash(region.wrapping_mul(0x9e37_79b9) ^ hash(hypothesis * 3 + j)) % n
+}
+
+/// Plane through three points as (unit normal, offset), or None if they are collinear.
+#[inline]
+pub fn plane_through(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> Option<([f32; 3], f32)> {
+    let (e1, e2) = ([b[0] - a[0], b[1] - a[1], b[2] - a[2]], [c[0] - a[0], c[1] - a[1], c[2] - a[2]]);
+    let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
+    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    if !(len > 1e-12) {
+        return None;
+    }
+    let n = [n[0] / len, n[1] / len, n[2] / len];
+    Some((n, -(n[0] * a[0] + n[1] * a[1] + n[2] * a[2])))
+}
+
+/// Scoring stride for a region of n points.
+#[inline]
+pub fn score_stride(n: usize) -> usize {
+    n.div_ceil(MAX_SCORE_POINTS).max(1)
+}
+
+/// Inlier count of every (region, hypothesis), row-major by region: the batched stage.
+pub fn score_hypotheses(batch: &PointBatch, hypotheses: u32, inlier_distance: f32) -> Vec<u32> {
+    (0..batch.ranges.len() * hypotheses as usize)
+        .into_par_iter()
+        .map(|k| {
+            let (r, h) = (k / hypotheses as usize, (k % hypotheses as usize) as u32);
+            let pts = &batch.points[batch.ranges[r].clone()];
+            let n = pts.len() as u32;
+            if n < 3 {
+                return 0;
+            }
+            let s = |j| pts[sample_index(r as u32, h, j, n) as usize];
+            let Some((nrm, d)) = plane_through(s(0), s(1), s(2)) else { return 0 };
+            pts.iter()
+                .step_by(score_stride(pts.len()))
+                .filter(|p| (nrm[0] * p[0] + nrm[1] * p[1] + nrm[2] * p[2] + d).abs() < inlier_distance)
+                .count() as u32
+        })
+        .collect()
+}
+
+/// The plane of the best hypothesis of region r (lowest index wins a tie).
+pub fn best_hypothesis(batch: &PointBatch, scores: &[u32], r: usize, hypotheses: u32) -> Option<([f32; 3], f32)> {
+    let row = &scores[r * hypotheses as usize..(r + 1) * hypotheses as usize];
+    let (h, &best) = row.iter().enumerate().max_by_key(|&(h, &s)| (s, std::cmp::Reverse(h)))?;
+    if best == 0 {
+        return None;
+    }
+    let pts = &batch.points[batch.ranges[r].clone()];
+    let n = pts.len() as u32;
+    let s = |j| pts[sample_index(r as u32, h as u32, j, n) as usize];
+    plane_through(s(0), s(1), s(2))
+}
+
+/// Least-squares plane through the points within `dist` of (n, d), then its support.
+pub fn refit(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32) -> Option<PlaneFit> {
+    let near = |p: &[f32; 3], n: [f32; 3], d: f32| (n[0] * p[0] + n[1] * p[1] + n[2] * p[2] + d).abs() < dist;
+    let inl: Vec<Vector3<f64>> =
+        points.iter().filter(|p| near(p, n, d)).map(|p| Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64)).collect();
+    if inl.len() < 3 {
+        return None;
+    }
+    let c = inl.iter().sum::<Vector3<f64>>() / inl.len() as f64;
+    let cov = inl.iter().fold(Matrix3::zeros(), |m, p| m + (p - c) * (p - c).transpose());
+    let eig = SymmetricEigen::new(cov);
+    let mut normal: Vector3<f64> = eig.eigenvectors.column(eig.eigenvalues.imin()).into();
+    // Face the camera (at the origin).
+    if normal.dot(&c) > 0.0 {
+        normal = -normal;
+    }
+    let offset = -normal.dot(&c);
+    let dists: Vec<f64> = points
+        .iter()
+        .map(|p| (normal.dot(&Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64)) + offset).abs())
+        .filter(|&e| e < dist as f64)
+        .collect();
+    let rms = (dists.iter().map(|e| e * e).sum::<f64>() / dists.len().max(1) as f64).sqrt();
+    Some(PlaneFit { normal, offset, inliers: dists.len(), points: points.len(), rms })
+}
+
+/// RANSAC then refit for every region: the whole CPU stage.
+pub fn fit_planes(batch: &PointBatch, hypotheses: u32, inlier_distance: f32) -> Vec<Option<PlaneFit>> {
+    let scores = score_hypotheses(batch, hypotheses, inlier_distance);
+    (0..batch.ranges.len())
+        .into_par_iter()
+        .map(|r| {
+            let (n, d) = best_hypothesis(batch, &scores, r, hypotheses)?;
+            refit(&batch.points[batch.ranges[r].clone()], n, d, inlier_distance)
+        })
+        .collect()
+}

@@ -1,0 +1,66 @@
+//! Debug pictures of every stage of one frame.
+
+use std::path::Path;
+
+use image::{Rgb, RgbImage};
+use imageproc::point::Point;
+use nalgebra::Point3;
+
+use super::{Polygon, Stages};
+use crate::types::Intrinsics;
+use crate::viz;
+
+/// Writes 1_depth, 2_smoothed, 3_normals, 4_edges and 5_polygons PNGs into `dir`.
+pub fn write_stage_images(
+    dir: &Path,
+    stages: &Stages,
+    polygons: &[Polygon],
+    intr: &Intrinsics,
+) -> image::ImageResult<()> {
+    std::fs::create_dir_all(dir)?;
+    let (w, h) = (intr.width, intr.height);
+    let (near, far) = viz::percentile_range(stages.depth.data.iter().filter(|&&d| d > 0.0).map(|&d| d as f64));
+    let depth = viz::depth_image(w, h, |i| stages.depth.data[i] as f64, near, far);
+    depth.save(dir.join("1_depth.png"))?;
+    viz::depth_image(w, h, |i| stages.smoothed.data[i] as f64, near, far).save(dir.join("2_smoothed.png"))?;
+    viz::normal_image(w, h, &stages.normals.data).save(dir.join("3_normals.png"))?;
+    // Canny edges white, the rest of the closed boundary grey.
+    RgbImage::from_fn(w, h, |u, v| {
+        let i = (v * w + u) as usize;
+        match (stages.canny.data[i], stages.boundary.data[i]) {
+            (1, _) => Rgb([255, 255, 255]),
+            (_, 1) => Rgb([110, 110, 110]),
+            _ => Rgb([0, 0, 0]),
+        }
+    })
+    .save(dir.join("4_edges.png"))?;
+    polygon_image(&depth, polygons, intr).save(dir.join("5_polygons.png"))
+}
+
+/// The polygons, filled in their id colours over the dimmed depth, outlined and with holes.
+pub fn polygon_image(depth: &RgbImage, polygons: &[Polygon], intr: &Intrinsics) -> RgbImage {
+    let mut img = viz::dimmed(depth);
+    let pixel = |v: &[f64; 3]| {
+        let (u, v) = intr.project(&Point3::new(v[0], v[1], v[2]));
+        (u as f32, v as f32)
+    };
+    for p in polygons {
+        let colour = viz::label_colour(p.id + 1);
+        let ring: Vec<(f32, f32)> = p.boundary.iter().map(pixel).collect();
+        let mut fill = img.clone();
+        let pts: Vec<Point<i32>> = ring.iter().map(|&(u, v)| Point::new(u.round() as i32, v.round() as i32)).collect();
+        if pts.len() >= 3 && pts.first() != pts.last() {
+            imageproc::drawing::draw_polygon_mut(&mut fill, &pts, colour);
+        }
+        for (a, b) in img.pixels_mut().zip(fill.pixels()) {
+            for c in 0..3 {
+                a.0[c] = ((a.0[c] as u16 + b.0[c] as u16) / 2) as u8;
+            }
+        }
+        viz::draw_ring(&mut img, &ring, colour);
+        for hole in &p.holes {
+            viz::draw_ring(&mut img, &hole.iter().map(pixel).collect::<Vec<_>>(), Rgb([255, 255, 255]));
+        }
+    }
+    img
+}

@@ -1,0 +1,279 @@
+//! Per-frame polygon extraction: depth frame + intrinsics -> planar polygons in the
+//! camera frame.
+//!
+//! Stages: diffusion -> normals -> Canny on normals (+ depth steps, no-normal pixels)
+//! -> close -> regions with holes (CPU) -> batched RANSAC + refit -> polygons ray cast
+//! onto their planes. Each image stage has a CPU twin in `cpu/`.
+
+pub mod contours;
+pub mod cpu;
+pub mod debug;
+
+use std::time::Instant;
+
+use nalgebra::{Isometry3, Point3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::config::PipelineConfig;
+use crate::types::{DepthFrame, Intrinsics, StampNs};
+use contours::Region;
+use cpu::ransac::{PlaneFit, PointBatch};
+
+/// A row-major image of any pixel type.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Grid<T> {
+    pub width: usize,
+    pub height: usize,
+    pub data: Vec<T>,
+}
+
+/// Why a frame could not be processed.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum ExtractError {
+    #[error("depth frame is {got_w}x{got_h} with {len} pixels, the intrinsics say {want_w}x{want_h}")]
+    SizeMismatch { got_w: u32, got_h: u32, len: usize, want_w: u32, want_h: u32 },
+    #[error("depth frame's depth_scale {0} is not a positive number of metres per unit")]
+    BadDepthScale(f64),
+}
+
+/// One planar polygon: plane n . p + d = 0 (n faces the camera), outline and holes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Polygon {
+    pub id: u32,
+    pub normal: [f64; 3],
+    pub offset: f64,
+    /// Area on the plane, holes excluded, m^2.
+    pub area: f64,
+    pub boundary: Vec<[f64; 3]>,
+    pub holes: Vec<Vec<[f64; 3]>>,
+    pub pixel_count: usize,
+    pub inlier_ratio: f64,
+    /// RMS point-to-plane distance of the inliers, m.
+    pub rms: f64,
+}
+
+impl Polygon {
+    /// The same polygon in another frame: `t` maps this polygon's frame into it.
+    pub fn transformed(&self, t: &Isometry3<f64>) -> Polygon {
+        let p = |v: &[f64; 3]| {
+            let q = t * Point3::new(v[0], v[1], v[2]);
+            [q.x, q.y, q.z]
+        };
+        let n = t.rotation * Vector3::from(self.normal);
+        // A point on the plane moves with t; the offset follows from it.
+        let on_plane = t * Point3::from(Vector3::from(self.normal) * -self.offset);
+        Polygon {
+            normal: [n.x, n.y, n.z],
+            offset: -n.dot(&on_plane.coords),
+            boundary: self.boundary.iter().map(p).collect(),
+            holes: self.holes.iter().map(|h| h.iter().map(p).collect()).collect(),
+            ..self.clone()
+        }
+    }
+
+    /// Mean of the boundary's area-weighted centroid (holes ignored), m.
+    pub fn centroid(&self) -> [f64; 3] {
+        let pts: Vec<Vector3<f64>> = self.boundary.iter().map(|v| Vector3::from(*v)).collect();
+        let mut acc = Vector3::zeros();
+        let mut total = 0.0;
+        for i in 1..pts.len().saturating_sub(1) {
+            let a = (pts[i] - pts[0]).cross(&(pts[i + 1] - pts[0])).dot(&Vector3::from(self.normal)) / 2.0;
+            acc += (pts[0] + pts[i] + pts[i + 1]) / 3.0 * a;
+            total += a;
+        }
+        let c =
+            if total.abs() > 1e-12 { acc / total } else { pts.iter().sum::<Vector3<f64>>() / pts.len().max(1) as f64 };
+        [c.x, c.y, c.z]
+    }
+}
+
+/// A frame's polygons.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FramePolygons {
+    pub stamp_ns: StampNs,
+    pub polygons: Vec<Polygon>,
+}
+
+/// Milliseconds spent in each stage of one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct StageTimes {
+    pub upload: f64,
+    pub diffusion: f64,
+    pub normals: f64,
+    pub edges: f64,
+    pub contours: f64,
+    pub ransac: f64,
+    pub polygons: f64,
+    pub total: f64,
+}
+
+/// Every intermediate image, for debug pictures and the twin comparisons.
+#[derive(Clone, Debug)]
+pub struct Stages {
+    pub depth: Grid<f32>,
+    pub smoothed: Grid<f32>,
+    pub normals: Grid<[f32; 3]>,
+    pub canny: Grid<u8>,
+    /// Canny + depth steps + no-normal pixels, closed: 1 = not inside any region.
+    pub boundary: Grid<u8>,
+    pub labels: Grid<u32>,
+    pub regions: Vec<Region>,
+    pub fits: Vec<Option<PlaneFit>>,
+}
+
+/// Smallest region worth a plane fit, pixels (the area test comes after the fit).
+const MIN_REGION_PIXELS: usize = 30;
+
+/// Depth units to metres (0 stays invalid), checking the frame against the intrinsics.
+pub fn depth_metres(frame: &DepthFrame, intr: &Intrinsics) -> Result<Grid<f32>, ExtractError> {
+    if frame.width != intr.width || frame.height != intr.height || frame.pixels.len() != intr.pixel_count() {
+        return Err(ExtractError::SizeMismatch {
+            got_w: frame.width,
+            got_h: frame.height,
+            len: frame.pixels.len(),
+            want_w: intr.width,
+            want_h: intr.height,
+        });
+    }
+    if !(frame.depth_scale.is_finite() && frame.depth_scale > 0.0) {
+        return Err(ExtractError::BadDepthScale(frame.depth_scale));
+    }
+    let s = frame.depth_scale as f32;
+    Ok(Grid {
+        width: intr.width as usize,
+        height: intr.height as usize,
+        data: frame.pixels.iter().map(|&d| d as f32 * s).collect(),
+    })
+}
+
+/// Extracts a frame's polygons on the CPU, keeping every stage's image.
+pub fn extract_cpu(
+    frame: &DepthFrame,
+    intr: &Intrinsics,
+    cfg: &PipelineConfig,
+) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
+    let mut times = StageTimes::default();
+    let t0 = Instant::now();
+    let mut lap = {
+        let mut last = Instant::now();
+        move || {
+            let now = Instant::now();
+            let ms = (now - last).as_secs_f64() * 1e3;
+            last = now;
+            ms
+        }
+    };
+    let depth = depth_metres(frame, intr)?;
+    times.upload = lap();
+    let smoothed = cpu::diffusion::diffuse(
+        &depth,
+        cfg.diffusion_iterations,
+        cfg.diffusion_kappa_m as f32,
+        cfg.diffusion_gamma as f32,
+    );
+    times.diffusion = lap();
+    let normals = cpu::normals::normals(&smoothed, intr, cfg.normal_kernel);
+    times.normals = lap();
+    let grad = cpu::canny::normal_gradient(&normals);
+    let canny = cpu::canny::canny(&grad, cfg.canny_low as f32, cfg.canny_high as f32);
+    let boundary =
+        cpu::canny::boundary(&canny, &smoothed, cfg.depth_edge_ratio as f32, &normals, cfg.closing_kernel_px);
+    times.edges = lap();
+    let (labels, regions) = contours::regions(&boundary, cfg.simplify_tolerance_px, MIN_REGION_PIXELS);
+    let batch = gather_points(&depth, &labels, &regions, intr);
+    times.contours = lap();
+    let fits = cpu::ransac::fit_planes(&batch, cfg.ransac_hypotheses, cfg.ransac_inlier_distance_m as f32);
+    times.ransac = lap();
+    let polygons = build_polygons(&regions, &fits, intr, cfg);
+    times.polygons = lap();
+    times.total = t0.elapsed().as_secs_f64() * 1e3;
+    let stages = Stages { depth, smoothed, normals, canny, boundary, labels, regions, fits };
+    Ok((FramePolygons { stamp_ns: frame.stamp_ns, polygons }, stages, times))
+}
+
+/// Camera-frame points (raw depth, valid pixels) of every region, in region order.
+pub fn gather_points(depth: &Grid<f32>, labels: &Grid<u32>, regions: &[Region], intr: &Intrinsics) -> PointBatch {
+    let max_label = regions.iter().map(|r| r.label).max().unwrap_or(0) as usize;
+    let mut index_of = vec![usize::MAX; max_label + 1];
+    for (i, r) in regions.iter().enumerate() {
+        index_of[r.label as usize] = i;
+    }
+    let mut per_region: Vec<Vec<[f32; 3]>> = vec![Vec::new(); regions.len()];
+    let (fx, fy, cx, cy) = (intr.fx as f32, intr.fy as f32, intr.cx as f32, intr.cy as f32);
+    for (i, (&l, &z)) in labels.data.iter().zip(&depth.data).enumerate() {
+        let l = l as usize;
+        if l == 0 || l > max_label || index_of[l] == usize::MAX || z == 0.0 {
+            continue;
+        }
+        let (u, v) = ((i % depth.width) as f32, (i / depth.width) as f32);
+        per_region[index_of[l]].push([(u - cx) / fx * z, (v - cy) / fy * z, z]);
+    }
+    let mut batch = PointBatch::default();
+    for pts in per_region {
+        let start = batch.points.len();
+        batch.points.extend(pts);
+        batch.ranges.push(start..batch.points.len());
+    }
+    batch
+}
+
+/// Polygons from regions and their plane fits: keep well-supported fits, ray cast the
+/// pixel outlines onto the planes, drop what is smaller than the minimum area.
+pub fn build_polygons(
+    regions: &[Region],
+    fits: &[Option<PlaneFit>],
+    intr: &Intrinsics,
+    cfg: &PipelineConfig,
+) -> Vec<Polygon> {
+    let mut out = Vec::new();
+    for (region, fit) in regions.iter().zip(fits) {
+        let Some(fit) = fit else { continue };
+        if fit.inlier_ratio() < cfg.ransac_min_inlier_ratio {
+            continue;
+        }
+        let onto_plane = |ring: &[[f32; 2]]| -> Option<Vec<[f64; 3]>> {
+            ring.iter()
+                .map(|&[u, v]| {
+                    let ray = intr.ray(u as f64, v as f64);
+                    let t = -fit.offset / fit.normal.dot(&ray);
+                    (t.is_finite() && t > 0.0).then(|| [ray.x * t, ray.y * t, ray.z * t])
+                })
+                .collect()
+        };
+        let Some(boundary) = onto_plane(&region.outer) else { continue };
+        let n = fit.normal;
+        // Holes smaller than a region worth keeping are sensor dropouts, not surface gaps.
+        let holes: Vec<Vec<[f64; 3]>> = region
+            .holes
+            .iter()
+            .filter_map(|h| onto_plane(h))
+            .filter(|h| ring_area(h, &n) >= cfg.min_polygon_area_m2)
+            .collect();
+        let area = ring_area(&boundary, &n) - holes.iter().map(|h| ring_area(h, &n)).sum::<f64>();
+        if area < cfg.min_polygon_area_m2 {
+            continue;
+        }
+        out.push(Polygon {
+            id: out.len() as u32,
+            normal: [n.x, n.y, n.z],
+            offset: fit.offset,
+            area,
+            boundary,
+            holes,
+            pixel_count: region.pixels,
+            inlier_ratio: fit.inlier_ratio(),
+            rms: fit.rms,
+        });
+    }
+    out
+}
+
+/// Area of a planar ring, m^2 (Newell's method, magnitude).
+pub fn ring_area(ring: &[[f64; 3]], normal: &Vector3<f64>) -> f64 {
+    let mut acc = Vector3::zeros();
+    for i in 0..ring.len() {
+        let (a, b) = (Vector3::from(ring[i]), Vector3::from(ring[(i + 1) % ring.len()]));
+        acc += a.cross(&b);
+    }
+    (acc.dot(normal) / 2.0).abs()
+}
