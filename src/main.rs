@@ -130,7 +130,8 @@ fn run(cli: Cli) -> Result<()> {
             tracing::info!("frame {frame}: {} polygons in {:.1} ms", result.polygons.len(), times.total);
             if let Some(dir) = &debug {
                 extract::debug::write_stage_images(dir, &stages, &result.polygons, &s.intrinsics)?;
-                println!("stage pictures in {}", dir.display());
+                // Not on stdout: without --out, stdout carries the JSON alone.
+                tracing::info!("stage pictures in {}", dir.display());
             }
             let polygons: Vec<_> = if world {
                 result.polygons.iter().map(|p| p.transformed(&s.poses[frame].transform)).collect()

@@ -71,7 +71,7 @@ impl Polygon {
         }
     }
 
-    /// Mean of the boundary's area-weighted centroid (holes ignored), m.
+    /// Area-weighted centroid of the outer boundary (holes ignored), m.
     pub fn centroid(&self) -> [f64; 3] {
         let pts: Vec<Vector3<f64>> = self.boundary.iter().map(|v| Vector3::from(*v)).collect();
         let mut acc = Vector3::zeros();
@@ -114,7 +114,7 @@ pub struct Stages {
     pub smoothed: Grid<f32>,
     pub normals: Grid<[f32; 3]>,
     pub canny: Grid<u8>,
-    /// Canny + depth steps + no-normal pixels, closed: 1 = not inside any region.
+    /// Closed edge lines (Canny + depth steps) plus no-normal pixels: 1 = not inside any region.
     pub boundary: Grid<u8>,
     pub labels: Grid<u32>,
     pub regions: Vec<Region>,
@@ -243,13 +243,17 @@ pub fn build_polygons(
         let Some(boundary) = onto_plane(&region.outer) else { continue };
         let n = fit.normal;
         // Holes smaller than a region worth keeping are sensor dropouts, not surface gaps.
-        let holes: Vec<Vec<[f64; 3]>> = region
+        let (holes, hole_areas): (Vec<Vec<[f64; 3]>>, Vec<f64>) = region
             .holes
             .iter()
             .filter_map(|h| onto_plane(h))
-            .filter(|h| ring_area(h, &n) >= cfg.min_polygon_area_m2)
-            .collect();
-        let area = ring_area(&boundary, &n) - holes.iter().map(|h| ring_area(h, &n)).sum::<f64>();
+            .map(|h| {
+                let a = ring_area(&h, &n);
+                (h, a)
+            })
+            .filter(|(_, a)| *a >= cfg.min_polygon_area_m2)
+            .unzip();
+        let area = ring_area(&boundary, &n) - hole_areas.iter().sum::<f64>();
         if area < cfg.min_polygon_area_m2 {
             continue;
         }

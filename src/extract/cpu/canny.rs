@@ -134,11 +134,9 @@ pub fn boundary(canny: &Grid<u8>, depth: &Grid<f32>, ratio: f32, normals: &Grid<
         for u in 0..w {
             let i = v * w + u;
             let z = depth.data[i];
-            let jump = |j: usize| z != 0.0 && depth.data[j] != 0.0 && (depth.data[j] - z).abs() > ratio * z;
-            let step = (u > 0 && jump(i - 1))
-                || (u + 1 < w && jump(i + 1))
-                || (v > 0 && jump(i - w))
-                || (v + 1 < h && jump(i + w));
+            let step = any_4_neighbour(u, v, w, h, |j| {
+                z != 0.0 && depth.data[j] != 0.0 && (depth.data[j] - z).abs() > ratio * z
+            });
             out[u] = (canny.data[i] != 0 || step) as u8;
         }
     });
@@ -149,16 +147,18 @@ pub fn boundary(canny: &Grid<u8>, depth: &Grid<f32>, ratio: f32, normals: &Grid<
     out.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
         for u in 0..w {
             let i = v * w + u;
-            let c = &closed.data;
-            let line = c[i] != 0
-                || (u > 0 && c[i - 1] != 0)
-                || (u + 1 < w && c[i + 1] != 0)
-                || (v > 0 && c[i - w] != 0)
-                || (v + 1 < h && c[i + w] != 0);
+            let line = closed.data[i] != 0 || any_4_neighbour(u, v, w, h, |j| closed.data[j] != 0);
             row[u] = (line || normals.data[i] == [0.0; 3]) as u8;
         }
     });
     Grid { width: w, height: h, data: out }
+}
+
+/// Whether `f` holds for the index of any 4-neighbour of (u, v) inside a w x h image.
+#[inline]
+fn any_4_neighbour(u: usize, v: usize, w: usize, h: usize, f: impl Fn(usize) -> bool) -> bool {
+    let i = v * w + u;
+    (u > 0 && f(i - 1)) || (u + 1 < w && f(i + 1)) || (v > 0 && f(i - w)) || (v + 1 < h && f(i + w))
 }
 
 /// Morphological close (dilate, then erode) with a `size` x `size` square; outside the
