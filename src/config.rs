@@ -130,7 +130,7 @@ impl Default for ExtrinsicsConfig {
     }
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Backend {
     /// The GPU when one is there and faster, else the CPU twin.
@@ -168,6 +168,8 @@ pub struct PipelineConfig {
     pub ransac_inlier_distance_m: f64,
     /// A polygon is kept when at least this fraction of its pixels are inliers.
     pub ransac_min_inlier_ratio: f64,
+    /// After the fits, regions take back border pixels on their plane up to this deep, pixels.
+    pub region_grow_px: u32,
 }
 
 impl Default for PipelineConfig {
@@ -181,12 +183,13 @@ impl Default for PipelineConfig {
             canny_low: 0.05,
             canny_high: 0.1,
             depth_edge_ratio: 0.03,
-            closing_kernel_px: 13,
+            closing_kernel_px: 7,
             min_polygon_area_m2: 0.01,
             simplify_tolerance_px: 1.5,
             ransac_hypotheses: 20,
             ransac_inlier_distance_m: 0.01,
             ransac_min_inlier_ratio: 0.9,
+            region_grow_px: 4,
         }
     }
 }
@@ -330,6 +333,7 @@ impl Config {
         check_range("pipeline.ransac_hypotheses", p.ransac_hypotheses as f64, 1.0, 1024.0)?;
         check_positive("pipeline.ransac_inlier_distance_m", p.ransac_inlier_distance_m)?;
         check_range("pipeline.ransac_min_inlier_ratio", p.ransac_min_inlier_ratio, 0.0, 1.0)?;
+        check_range("pipeline.region_grow_px", p.region_grow_px as f64, 0.0, 32.0)?;
 
         let m = &self.map;
         check_positive("map.merge_height_tolerance_m", m.merge_height_tolerance_m)?;

@@ -6,6 +6,7 @@
 //! (metres, radians, nanosecond stamps, `T_a_b` maps frame b into frame a).
 
 pub mod config;
+pub mod eval;
 pub mod extract;
 pub mod sequence;
 pub mod synth;

@@ -5,11 +5,11 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use polymap::config::Config;
-use polymap::extract;
+use polymap::config::{Backend, Config};
 use polymap::sequence::Sequence;
 use polymap::synth::{self, SceneKind, SynthOptions};
 use polymap::viz;
+use polymap::{eval, extract};
 
 #[derive(Parser)]
 #[command(name = "polymap", version, about = "Real-time polygonal terrain mapping for legged robots", long_about = None)]
@@ -70,6 +70,26 @@ enum Command {
         /// Pipeline settings from this config file (default: the built-in defaults)
         #[arg(long)]
         config: Option<PathBuf>,
+        /// Override the config's pipeline.backend
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+    },
+    /// Single-frame accuracy over every frame of a sequence with truth: alpha, IOU, step-height error
+    Eval {
+        seq: PathBuf,
+        /// Pipeline settings from this config file (default: the built-in defaults)
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Print the per-tread scores and the summary as JSON instead of a table
+        #[arg(long)]
+        json: bool,
+        /// Override the config's pipeline.backend
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+        /// Write one picture per frame of how polygons and treads overlap (green: both,
+        /// red: polygon only, blue: tread only)
+        #[arg(long)]
+        debug: Option<PathBuf>,
     },
     /// Check a config file and print it with every default filled in
     Config { file: PathBuf },
@@ -116,17 +136,14 @@ fn run(cli: Cli) -> Result<()> {
                 write_previews(&s, &dir)?;
             }
         }
-        Command::Extract { seq, frame, out, world, debug, config } => {
-            let config = match config {
-                Some(f) => Config::load(f)?,
-                None => Config::default(),
-            };
+        Command::Extract { seq, frame, out, world, debug, config, backend } => {
+            let config = load_config(config, backend)?;
             let s = Sequence::open(&seq)?;
             if frame >= s.len() {
                 bail!("--frame {frame}: {} has frames 0..{}", seq.display(), s.len());
             }
             let depth = s.depth(frame)?;
-            let (result, stages, times) = extract::extract_cpu(&depth, &s.intrinsics, &config.pipeline)?;
+            let (result, stages, times) = extract::Extractor::new(&config.pipeline)?.extract(&depth, &s.intrinsics)?;
             tracing::info!("frame {frame}: {} polygons in {:.1} ms", result.polygons.len(), times.total);
             if let Some(dir) = &debug {
                 extract::debug::write_stage_images(dir, &stages, &result.polygons, &s.intrinsics)?;
@@ -148,11 +165,104 @@ fn run(cli: Cli) -> Result<()> {
                 None => println!("{json}"),
             }
         }
+        Command::Eval { seq, config, json, backend, debug } => {
+            let config = load_config(config, backend)?;
+            evaluate(&Sequence::open(&seq)?, &config, json, debug.as_deref())?;
+        }
         Command::Config { file } => {
             let config = Config::load(&file)?;
             print!("{}", toml::to_string(&config)?);
         }
     }
+    Ok(())
+}
+
+/// The config file's settings (or the defaults), with the backend overridden if asked.
+fn load_config(file: Option<PathBuf>, backend: Option<Backend>) -> Result<Config> {
+    let mut config = match file {
+        Some(f) => Config::load(f)?,
+        None => Config::default(),
+    };
+    if let Some(b) = backend {
+        config.pipeline.backend = b;
+    }
+    Ok(config)
+}
+
+/// `polymap eval SEQ`: extracts every frame and scores its treads against the truth.
+fn evaluate(s: &Sequence, config: &Config, json: bool, debug: Option<&Path>) -> Result<()> {
+    let Some(truth) = &s.truth else { bail!("{} has no truth.json to evaluate against", s.dir.display()) };
+    if !s.has_labels {
+        bail!("{} has no labels/: single-frame IOU needs them", s.dir.display());
+    }
+    let rise = truth.stair.as_ref().map_or(f64::NAN, |st| st.rise);
+    let mut extractor = extract::Extractor::new(&config.pipeline)?;
+    let bar = progress(s.len() as u64, "eval");
+    let mut scores = Vec::new();
+    for k in 0..s.len() {
+        let (result, _, _) = extractor.extract(&s.depth(k)?, &s.intrinsics)?;
+        let labels = s.labels(k)?;
+        scores.extend(eval::score_frame(k, &result.polygons, &s.poses[k].transform, &labels, truth, &s.intrinsics));
+        if let Some(dir) = debug {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            let path = dir.join(format!("{k:06}.png"));
+            eval::match_image(&result.polygons, &labels, truth, &s.intrinsics)
+                .save(&path)
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let summary = eval::summarise(&scores, rise);
+    if json {
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "treads": scores, "summary": summary }))?);
+        return Ok(());
+    }
+    println!(
+        "{}: {} frames {}x{}, treads with >= {} visible pixels",
+        s.dir.display(),
+        s.len(),
+        s.intrinsics.width,
+        s.intrinsics.height,
+        eval::min_visible_pixels(s.intrinsics.pixel_count())
+    );
+    println!(
+        "{:>5} {:>7} {:>6} {:>10} {:>10} {:>9} {:>9}",
+        "step", "frames", "found", "alpha deg", "IOU mean", "IOU min", "height m"
+    );
+    let max_step = scores.iter().map(|t| t.step).max().unwrap_or(0);
+    for step in 0..=max_step {
+        let of: Vec<_> = scores.iter().filter(|t| t.step == step).collect();
+        if of.is_empty() {
+            continue;
+        }
+        let alpha: Vec<f64> = of.iter().filter_map(|t| t.alpha_deg).collect();
+        let ious: Vec<f64> = of.iter().map(|t| t.iou).collect();
+        let heights: Vec<f64> = of.iter().filter_map(|t| t.height).collect();
+        println!(
+            "{:>5} {:>7} {:>6} {:>10.3} {:>10.3} {:>9.3} {:>9.4}",
+            step,
+            of.len(),
+            of.iter().filter(|t| t.found).count(),
+            eval::mean_std(&alpha).0,
+            eval::mean_std(&ious).0,
+            ious.iter().copied().fold(f64::NAN, f64::min),
+            eval::mean_std(&heights).0
+        );
+    }
+    let m = &summary;
+    println!(
+        "treads found {}/{}; alpha mean {:.3} deg, std {:.3} deg; IOU mean {:.3} (min {:.3}); step-height error mean {:.2} mm, std {:.2} mm over {} pairs",
+        m.treads_found,
+        m.treads_in_view,
+        m.alpha_mean_deg,
+        m.alpha_std_deg,
+        m.iou_mean,
+        m.iou_min,
+        m.step_error_mean_mm,
+        m.step_error_std_mm,
+        m.step_pairs
+    );
     Ok(())
 }
 

@@ -225,3 +225,110 @@ fn all_invalid_frame_gives_no_polygons_and_a_bad_frame_an_error() {
     let bad_scale = DepthFrame { depth_scale: f64::NAN, ..empty };
     assert!(matches!(extract_cpu(&bad_scale, &i, &PipelineConfig::default()), Err(ExtractError::BadDepthScale(_))));
 }
+
+/// A frame whose left part sees a floor and right part a step above it, with no edge
+/// between them in the boundary map: one region that leaks across two surfaces.
+#[test]
+fn a_region_leaking_across_two_planes_is_split_and_both_are_fitted() {
+    use polymap::extract::segment::Segmentation;
+    let i = intr(160, 120);
+    let floor = plane_depth(&i, Vector3::new(0.0, -0.8, -0.6), 1.0);
+    // A step 20 cm up: parallel, so the two planes never meet in view.
+    let wall = plane_depth(&i, Vector3::new(0.0, -0.8, -0.6), 0.8);
+    let depth = Grid {
+        data: floor
+            .data
+            .iter()
+            .zip(&wall.data)
+            .enumerate()
+            .map(|(k, (f, w))| if k % 160 < 100 { *f } else { *w })
+            .collect(),
+        ..floor
+    };
+    let boundary = Grid { width: 160, height: 120, data: vec![0u8; 160 * 120] };
+    let mut seg = Segmentation::components(&boundary, 30);
+    assert_eq!(seg.pixels.len(), 1);
+    let mut fits = ransac::fit_planes(&seg.points(&[0], &depth, &i), 20, 0.01);
+    assert!(fits[0].unwrap().inlier_ratio() < 0.9, "one plane cannot fit both surfaces");
+    let pieces = seg.split_leaks(&mut fits, &depth, &i, 0.01, 0.9, 30);
+    assert_eq!(
+        pieces,
+        vec![1],
+        "the other surface becomes a new region ({:?})",
+        seg.pixels.iter().map(|p| p.len()).collect::<Vec<_>>()
+    );
+    let refit = ransac::fit_planes(&seg.points(&pieces, &depth, &i), 20, 0.01);
+    fits[1] = refit[0];
+    let kept = fits[0].unwrap();
+    assert!(
+        kept.inlier_ratio() > 0.99 && kept.normal.angle(&Vector3::new(0.0, -0.8, -0.6)) < 1e-3,
+        "the larger part keeps the floor"
+    );
+    assert!(seg.pixels[0].iter().all(|&p| p % 160 < 100), "and only the floor's pixels");
+    let new = fits[1].unwrap();
+    assert!(new.normal.angle(&Vector3::new(0.0, -0.8, -0.6)) < 1e-3 && (new.offset - 0.8).abs() < 1e-3);
+    assert_eq!(seg.pixels[0].len() + seg.pixels[1].len(), 160 * 120);
+}
+
+#[test]
+fn regions_grow_back_over_their_own_plane_but_not_onto_another() {
+    use polymap::extract::segment::Segmentation;
+    let i = intr(100, 80);
+    // A floor with a 10 cm step up beyond column 60.
+    let low = plane_depth(&i, Vector3::new(0.0, -0.8, -0.6), 1.0);
+    let high = plane_depth(&i, Vector3::new(0.0, -0.8, -0.6), 0.9);
+    let depth = Grid {
+        data: low
+            .data
+            .iter()
+            .zip(&high.data)
+            .enumerate()
+            .map(|(k, (l, h))| if k % 100 < 60 { *l } else { *h })
+            .collect(),
+        ..low
+    };
+    // Boundary: a band of columns 50..66 around the step, as edges and closing would leave.
+    let boundary =
+        Grid { width: 100, height: 80, data: (0..8000).map(|k| (50..66).contains(&(k % 100)) as u8).collect() };
+    let mut seg = Segmentation::components(&boundary, 30);
+    assert_eq!(seg.pixels.len(), 2);
+    let fits = ransac::fit_planes(&seg.points(&[0, 1], &depth, &i), 20, 0.01);
+    seg.grow(&fits, &[true, true], &depth, &i, 0.01, 4);
+    let columns = |r: usize| {
+        let mut c: Vec<u32> = seg.pixels[r].iter().map(|p| p % 100).collect();
+        c.sort_unstable();
+        c.dedup();
+        (c[0], *c.last().unwrap())
+    };
+    assert_eq!(columns(0), (0, 53), "the low floor takes back 4 columns of its own plane");
+    assert_eq!(columns(1), (62, 99), "so does the high one");
+    let mut both = seg.pixels[0].clone();
+    both.extend(&seg.pixels[1]);
+    assert!(both.iter().all(|&p| (p % 100 < 60) == seg.pixels[0].contains(&p)), "no pixel crosses the step");
+}
+
+#[test]
+fn outlines_cover_their_pixels_squares_and_holes_shrink() {
+    use polymap::eval::fill_rings;
+    use polymap::extract::contours::offset_ring;
+    // A 10 x 6 block of pixels has its centres' outline from (2,3) to (11,8).
+    let centres = vec![[2.0, 3.0], [11.0, 3.0], [11.0, 8.0], [2.0, 8.0]];
+    let outer = offset_ring(&centres, 0.5);
+    let area = |r: &[[f32; 2]]| {
+        (0..r.len()).map(|k| r[k][0] * r[(k + 1) % r.len()][1] - r[(k + 1) % r.len()][0] * r[k][1]).sum::<f32>().abs()
+            / 2.0
+    };
+    assert!((area(&outer) - 60.0).abs() < 1e-4, "the squares' area, {}", area(&outer));
+    let mask = fill_rings(&[outer.iter().map(|p| [p[0] as f64, p[1] as f64]).collect()], 20, 12);
+    assert_eq!(mask.iter().filter(|&&m| m).count(), 60, "filled at pixel centres: exactly the block");
+    // Reversed orientation moves the same way: offset is by inside, not by winding.
+    let reversed: Vec<[f32; 2]> = centres.iter().rev().copied().collect();
+    assert!((area(&offset_ring(&reversed, 0.5)) - 60.0).abs() < 1e-4);
+    // A hole ring through the centres (4,4)..(7,7) of the pixels around 2 x 2 missing
+    // ones shrinks by half a pixel to the missing pixels' squares: area 4.
+    let hole = offset_ring(&[[4.0, 4.0], [7.0, 4.0], [7.0, 7.0], [4.0, 7.0]], -0.5);
+    assert!((area(&hole) - 4.0).abs() < 1e-4);
+    let rings: Vec<Vec<[f64; 2]>> =
+        [outer, hole].iter().map(|r| r.iter().map(|p| [p[0] as f64, p[1] as f64]).collect()).collect();
+    assert_eq!(fill_rings(&rings, 20, 12).iter().filter(|&&m| m).count(), 56, "even-odd: the hole's pixels are out");
+}

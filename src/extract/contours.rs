@@ -1,17 +1,17 @@
-//! Planar regions from the boundary map: connected components, their outer contour
-//! and holes, simplified to polygons in pixel coordinates.
+//! Outlines of regions: outer contour and holes, simplified to polygons in pixel
+//! coordinates.
 //!
 //! imageproc does the tracing (Suzuki-Abe border following, the algorithm behind
-//! OpenCV's findContours) and the labelling, both with 8-connectivity so a contour
-//! and its component always agree; Douglas-Peucker simplifies.
+//! OpenCV's findContours) with 8-connectivity, the connectivity of the regions, so a
+//! contour and its region always agree; Douglas-Peucker simplifies.
 
 use image::{GrayImage, Luma};
 use imageproc::contours::{BorderType, find_contours};
 use imageproc::geometry::approximate_polygon_dp;
 use imageproc::point::Point;
-use imageproc::region_labelling::{Connectivity, connected_components};
+use rayon::prelude::*;
 
-use crate::extract::Grid;
+use super::segment::Segmentation;
 
 /// One region: its component label, outline and holes (pixel centres, simplified).
 #[derive(Clone, Debug, PartialEq)]
@@ -22,51 +22,81 @@ pub struct Region {
     pub pixels: usize,
 }
 
-/// Regions of the pixels where `boundary` is 0, with at least `min_pixels` pixels, and
-/// the component label of every pixel (0 = boundary).
-pub fn regions(boundary: &Grid<u8>, simplify_px: f64, min_pixels: usize) -> (Grid<u32>, Vec<Region>) {
-    let (w, h) = (boundary.width as u32, boundary.height as u32);
-    let inside =
-        GrayImage::from_fn(w, h, |u, v| Luma([if boundary.data[(v * w + u) as usize] == 0 { 255 } else { 0 }]));
-    let labels = connected_components(&inside, Connectivity::Eight, Luma([0u8]));
-    let mut pixels = vec![0usize; 1];
-    for l in labels.pixels() {
-        let l = l.0[0] as usize;
-        if l >= pixels.len() {
-            pixels.resize(l + 1, 0);
-        }
-        pixels[l] += 1;
-    }
-    let simplify = |pts: &[Point<i32>]| -> Vec<[f32; 2]> {
-        let simple = if pts.len() > 3 { approximate_polygon_dp(pts, simplify_px, true) } else { pts.to_vec() };
-        simple.iter().map(|p| [p.x as f32, p.y as f32]).collect()
-    };
-    let contours = find_contours::<i32>(&inside);
-    let mut out: Vec<Region> = Vec::new();
-    let mut region_of_contour = vec![None; contours.len()];
-    for (ci, c) in contours.iter().enumerate() {
-        if c.border_type != BorderType::Outer || c.points.is_empty() {
-            continue;
-        }
-        let p = c.points[0];
-        let label = labels.get_pixel(p.x as u32, p.y as u32).0[0];
-        if pixels[label as usize] < min_pixels || c.points.len() < 3 {
-            continue;
-        }
-        region_of_contour[ci] = Some(out.len());
-        out.push(Region { label, outer: simplify(&c.points), holes: Vec::new(), pixels: pixels[label as usize] });
-    }
-    for c in &contours {
-        if c.border_type == BorderType::Hole
-            && c.points.len() >= 3
-            && let Some(r) = c.parent.and_then(|p| region_of_contour[p])
-        {
-            let hole = simplify(&c.points);
-            if hole.len() >= 3 {
-                out[r].holes.push(hole);
+/// The outline and holes of every region of `seg`, simplified by Douglas-Peucker with
+/// `simplify_px`, then moved half a pixel outwards (holes shrink) so that the polygon
+/// covers its pixels' squares rather than joining their centres.
+pub fn trace(seg: &Segmentation, simplify_px: f64) -> Vec<Region> {
+    let w = seg.labels.width;
+    seg.pixels
+        .par_iter()
+        .enumerate()
+        .map(|(r, pixels)| {
+            let label = r as u32 + 1;
+            if pixels.is_empty() {
+                return Region { label, outer: Vec::new(), holes: Vec::new(), pixels: 0 };
             }
-        }
+            // The region's bounding box with a one-pixel margin, so its border is traced whole.
+            let (mut u0, mut v0, mut u1, mut v1) = (usize::MAX, usize::MAX, 0, 0);
+            for &i in pixels {
+                let (u, v) = (i as usize % w, i as usize / w);
+                (u0, v0, u1, v1) = (u0.min(u), v0.min(v), u1.max(u), v1.max(v));
+            }
+            let mut mask = GrayImage::new((u1 - u0 + 3) as u32, (v1 - v0 + 3) as u32);
+            for &i in pixels {
+                let (u, v) = (i as usize % w, i as usize / w);
+                mask.put_pixel((u - u0 + 1) as u32, (v - v0 + 1) as u32, Luma([255]));
+            }
+            let to_image = |ring: Vec<[f32; 2]>, outwards: f32| -> Vec<[f32; 2]> {
+                offset_ring(&ring, outwards).iter().map(|p| [p[0] + u0 as f32 - 1.0, p[1] + v0 as f32 - 1.0]).collect()
+            };
+            let contours = find_contours::<i32>(&mask);
+            let outer_index = contours.iter().position(|c| c.border_type == BorderType::Outer);
+            let mut region = Region { label, outer: Vec::new(), holes: Vec::new(), pixels: pixels.len() };
+            let Some(oi) = outer_index else { return region };
+            region.outer = to_image(simplify(&contours[oi].points, simplify_px), 0.5);
+            for c in &contours {
+                if c.border_type == BorderType::Hole && c.parent == Some(oi) {
+                    let hole = simplify(&c.points, simplify_px);
+                    if hole.len() >= 3 {
+                        region.holes.push(to_image(hole, -0.5));
+                    }
+                }
+            }
+            region
+        })
+        .collect()
+}
+
+fn simplify(pts: &[Point<i32>], tolerance: f64) -> Vec<[f32; 2]> {
+    let simple = if pts.len() > 3 { approximate_polygon_dp(pts, tolerance, true) } else { pts.to_vec() };
+    simple.iter().map(|p| [p.x as f32, p.y as f32]).collect()
+}
+
+/// The ring with every edge moved `d` pixels away from the ring's inside (d < 0: towards
+/// it). Vertices move along the bisector, the shift capped at 2|d| on sharp corners.
+pub fn offset_ring(ring: &[[f32; 2]], d: f32) -> Vec<[f32; 2]> {
+    let n = ring.len();
+    if n < 3 || d == 0.0 {
+        return ring.to_vec();
     }
-    out.sort_by_key(|r| r.label);
-    (Grid { width: w as usize, height: h as usize, data: labels.into_raw() }, out)
+    // Twice the signed area: its sign says which side of each edge is inside.
+    let area2: f32 = (0..n).map(|i| ring[i][0] * ring[(i + 1) % n][1] - ring[(i + 1) % n][0] * ring[i][1]).sum();
+    let side = if area2 > 0.0 { 1.0 } else { -1.0 };
+    // Outward unit normal of edge i (from vertex i to i + 1).
+    let normal = |i: usize| {
+        let (a, b) = (ring[i], ring[(i + 1) % n]);
+        let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
+        let len = (ex * ex + ey * ey).sqrt().max(1e-6);
+        [side * ey / len, -side * ex / len]
+    };
+    (0..n)
+        .map(|i| {
+            let (a, b) = (normal((i + n - 1) % n), normal(i));
+            let (sx, sy) = (a[0] + b[0], a[1] + b[1]);
+            let dot = (sx * a[0] + sy * a[1]).max(1e-6);
+            // Along the bisector, far enough that both edges move by d.
+            let scale = (d / dot).clamp(-2.0 * d.abs(), 2.0 * d.abs());
+            [ring[i][0] + sx * scale, ring[i][1] + sy * scale]
+        })
+        .collect()
 }

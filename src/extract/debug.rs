@@ -3,14 +3,13 @@
 use std::path::Path;
 
 use image::{Rgb, RgbImage};
-use imageproc::point::Point;
 use nalgebra::Point3;
 
 use super::{Polygon, Stages};
 use crate::types::Intrinsics;
 use crate::viz;
 
-/// Writes 1_depth, 2_smoothed, 3_normals, 4_edges and 5_polygons PNGs into `dir`.
+/// Writes 1_depth, 2_smoothed, 3_normals, 4_edges, 5_regions and 6_polygons PNGs into `dir`.
 pub fn write_stage_images(
     dir: &Path,
     stages: &Stages,
@@ -34,7 +33,9 @@ pub fn write_stage_images(
         }
     })
     .save(dir.join("4_edges.png"))?;
-    polygon_image(&depth, polygons, intr).save(dir.join("5_polygons.png"))
+    RgbImage::from_fn(w, h, |u, v| viz::label_colour(stages.labels.data[(v * w + u) as usize]))
+        .save(dir.join("5_regions.png"))?;
+    polygon_image(&depth, polygons, intr).save(dir.join("6_polygons.png"))
 }
 
 /// The polygons, filled in their id colours over the dimmed depth, outlined and with holes.
@@ -47,14 +48,11 @@ pub fn polygon_image(depth: &RgbImage, polygons: &[Polygon], intr: &Intrinsics) 
     for p in polygons {
         let colour = viz::label_colour(p.id + 1);
         let ring: Vec<(f32, f32)> = p.boundary.iter().map(pixel).collect();
-        let mut fill = img.clone();
-        let pts: Vec<Point<i32>> = ring.iter().map(|&(u, v)| Point::new(u.round() as i32, v.round() as i32)).collect();
-        if pts.len() >= 3 && pts.first() != pts.last() {
-            imageproc::drawing::draw_polygon_mut(&mut fill, &pts, colour);
-        }
-        for (a, b) in img.pixels_mut().zip(fill.pixels()) {
+        // Filled the way eval scores it: pixel centres inside the outline and outside the holes.
+        let inside = crate::eval::polygon_mask(p, intr);
+        for (a, _) in img.pixels_mut().zip(&inside).filter(|(_, inside)| **inside) {
             for c in 0..3 {
-                a.0[c] = ((a.0[c] as u16 + b.0[c] as u16) / 2) as u8;
+                a.0[c] = ((a.0[c] as u16 + colour.0[c] as u16) / 2) as u8;
             }
         }
         viz::draw_ring(&mut img, &ring, colour);

@@ -8,16 +8,19 @@
 pub mod contours;
 pub mod cpu;
 pub mod debug;
+pub mod gpu;
+pub mod segment;
 
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::config::PipelineConfig;
+use crate::config::{Backend, PipelineConfig};
 use crate::types::{DepthFrame, Intrinsics, StampNs};
 use contours::Region;
 use cpu::ransac::{PlaneFit, PointBatch};
+use segment::Segmentation;
 
 /// A row-major image of any pixel type.
 #[derive(Clone, Debug, PartialEq)]
@@ -28,12 +31,14 @@ pub struct Grid<T> {
 }
 
 /// Why a frame could not be processed.
-#[derive(Debug, thiserror::Error, PartialEq)]
+#[derive(Debug, thiserror::Error)]
 pub enum ExtractError {
     #[error("depth frame is {got_w}x{got_h} with {len} pixels, the intrinsics say {want_w}x{want_h}")]
     SizeMismatch { got_w: u32, got_h: u32, len: usize, want_w: u32, want_h: u32 },
     #[error("depth frame's depth_scale {0} is not a positive number of metres per unit")]
     BadDepthScale(f64),
+    #[error(transparent)]
+    Gpu(#[from] gpu::GpuError),
 }
 
 /// One planar polygon: plane n . p + d = 0 (n faces the camera), outline and holes.
@@ -146,6 +151,98 @@ pub fn depth_metres(frame: &DepthFrame, intr: &Intrinsics) -> Result<Grid<f32>, 
     })
 }
 
+/// Which twin runs the stages.
+pub enum Engine {
+    Cpu,
+    Gpu(Box<gpu::Gpu>),
+}
+
+/// The extractor of a running pipeline: the backend chosen by config, and its state.
+pub struct Extractor {
+    pub engine: Engine,
+    /// With `auto` on a software adapter: the first frame times both twins and keeps the faster.
+    race_first_frame: bool,
+    pub cfg: PipelineConfig,
+}
+
+impl Extractor {
+    /// Opens the configured backend. `gpu` fails without a Vulkan adapter; `auto` falls
+    /// back to the CPU twin then, and says so once in the log.
+    pub fn new(cfg: &PipelineConfig) -> Result<Extractor, ExtractError> {
+        let (engine, race_first_frame) = match cfg.backend {
+            Backend::Cpu => (Engine::Cpu, false),
+            Backend::Gpu => {
+                let gpu = gpu::Gpu::new()?;
+                tracing::info!("extraction on the GPU: {}", gpu.describe());
+                (Engine::Gpu(Box::new(gpu)), false)
+            }
+            Backend::Auto => match gpu::Gpu::new() {
+                Ok(gpu) if gpu.is_software() => (Engine::Gpu(Box::new(gpu)), true),
+                Ok(gpu) => {
+                    tracing::info!("extraction on the GPU: {}", gpu.describe());
+                    (Engine::Gpu(Box::new(gpu)), false)
+                }
+                Err(e) => {
+                    tracing::info!("extraction on the CPU twin: {e}");
+                    (Engine::Cpu, false)
+                }
+            },
+        };
+        Ok(Extractor { engine, race_first_frame, cfg: cfg.clone() })
+    }
+
+    /// "gpu" or "cpu".
+    pub fn backend(&self) -> &'static str {
+        match self.engine {
+            Engine::Cpu => "cpu",
+            Engine::Gpu(_) => "gpu",
+        }
+    }
+
+    pub fn extract(
+        &mut self,
+        frame: &DepthFrame,
+        intr: &Intrinsics,
+    ) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
+        if std::mem::take(&mut self.race_first_frame)
+            && let Engine::Gpu(gpu) = &mut self.engine
+        {
+            // The first GPU run compiles and allocates: time the second.
+            extract_gpu(gpu, frame, intr, &self.cfg)?;
+            let gpu_ms = extract_gpu(gpu, frame, intr, &self.cfg)?.2.total;
+            let cpu = extract_cpu(frame, intr, &self.cfg)?;
+            let name = gpu.describe();
+            if cpu.2.total < gpu_ms {
+                tracing::info!(
+                    "extraction on the CPU twin: the only adapter, {name}, is software and slower ({gpu_ms:.1} ms vs {:.1} ms a frame)",
+                    cpu.2.total
+                );
+                self.engine = Engine::Cpu;
+                return Ok(cpu);
+            }
+            tracing::info!(
+                "extraction on the GPU: {name} ({gpu_ms:.1} ms vs the CPU twin's {:.1} ms a frame)",
+                cpu.2.total
+            );
+        }
+        match &mut self.engine {
+            Engine::Cpu => extract_cpu(frame, intr, &self.cfg),
+            Engine::Gpu(gpu) => extract_gpu(gpu, frame, intr, &self.cfg),
+        }
+    }
+}
+
+/// Milliseconds since the last call, for stage times.
+fn stopwatch() -> impl FnMut() -> f64 {
+    let mut last = Instant::now();
+    move || {
+        let now = Instant::now();
+        let ms = (now - last).as_secs_f64() * 1e3;
+        last = now;
+        ms
+    }
+}
+
 /// Extracts a frame's polygons on the CPU, keeping every stage's image.
 pub fn extract_cpu(
     frame: &DepthFrame,
@@ -154,15 +251,7 @@ pub fn extract_cpu(
 ) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
     let mut times = StageTimes::default();
     let t0 = Instant::now();
-    let mut lap = {
-        let mut last = Instant::now();
-        move || {
-            let now = Instant::now();
-            let ms = (now - last).as_secs_f64() * 1e3;
-            last = now;
-            ms
-        }
-    };
+    let mut lap = stopwatch();
     let depth = depth_metres(frame, intr)?;
     times.upload = lap();
     let smoothed = cpu::diffusion::diffuse(
@@ -175,46 +264,114 @@ pub fn extract_cpu(
     let normals = cpu::normals::normals(&smoothed, intr, cfg.normal_kernel);
     times.normals = lap();
     let grad = cpu::canny::normal_gradient(&normals);
-    let canny = cpu::canny::canny(&grad, cfg.canny_low as f32, cfg.canny_high as f32);
-    let boundary =
-        cpu::canny::boundary(&canny, &smoothed, cfg.depth_edge_ratio as f32, &normals, cfg.closing_kernel_px);
-    times.edges = lap();
-    let (labels, regions) = contours::regions(&boundary, cfg.simplify_tolerance_px, MIN_REGION_PIXELS);
-    let batch = gather_points(&depth, &labels, &regions, intr);
-    times.contours = lap();
-    let fits = cpu::ransac::fit_planes(&batch, cfg.ransac_hypotheses, cfg.ransac_inlier_distance_m as f32);
-    times.ransac = lap();
-    let polygons = build_polygons(&regions, &fits, intr, cfg);
-    times.polygons = lap();
+    let class = cpu::canny::classify(&grad, cfg.canny_low as f32, cfg.canny_high as f32);
+    let fit = |batch: &PointBatch| {
+        Ok(cpu::ransac::fit_planes(batch, cfg.ransac_hypotheses, cfg.ransac_inlier_distance_m as f32))
+    };
+    let (polygons, stages) = finish(depth, smoothed, normals, &class, intr, cfg, fit, &mut times, &mut lap)?;
     times.total = t0.elapsed().as_secs_f64() * 1e3;
-    let stages = Stages { depth, smoothed, normals, canny, boundary, labels, regions, fits };
     Ok((FramePolygons { stamp_ns: frame.stamp_ns, polygons }, stages, times))
 }
 
-/// Camera-frame points (raw depth, valid pixels) of every region, in region order.
-pub fn gather_points(depth: &Grid<f32>, labels: &Grid<u32>, regions: &[Region], intr: &Intrinsics) -> PointBatch {
-    let max_label = regions.iter().map(|r| r.label).max().unwrap_or(0) as usize;
-    let mut index_of = vec![usize::MAX; max_label + 1];
-    for (i, r) in regions.iter().enumerate() {
-        index_of[r.label as usize] = i;
-    }
-    let mut per_region: Vec<Vec<[f32; 3]>> = vec![Vec::new(); regions.len()];
-    let (fx, fy, cx, cy) = (intr.fx as f32, intr.fy as f32, intr.cx as f32, intr.cy as f32);
-    for (i, (&l, &z)) in labels.data.iter().zip(&depth.data).enumerate() {
-        let l = l as usize;
-        if l == 0 || l > max_label || index_of[l] == usize::MAX || z == 0.0 {
-            continue;
+/// Extracts a frame's polygons with the image stages and the RANSAC scoring on the GPU.
+pub fn extract_gpu(
+    gpu: &mut gpu::Gpu,
+    frame: &DepthFrame,
+    intr: &Intrinsics,
+    cfg: &PipelineConfig,
+) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
+    let mut times = StageTimes::default();
+    let t0 = Instant::now();
+    let depth = depth_metres(frame, intr)?;
+    let out = gpu.image_stages(
+        &depth,
+        intr,
+        cfg.diffusion_iterations,
+        cfg.diffusion_kappa_m as f32,
+        cfg.diffusion_gamma as f32,
+        cfg.normal_kernel,
+        cfg.canny_low as f32,
+        cfg.canny_high as f32,
+    )?;
+    [times.upload, times.diffusion, times.normals, times.edges] = out.times;
+    times.upload += t0.elapsed().as_secs_f64() * 1e3 - out.times.iter().sum::<f64>();
+    let mut lap = stopwatch();
+    let (hyp, dist) = (cfg.ransac_hypotheses, cfg.ransac_inlier_distance_m as f32);
+    let gpu = &*gpu;
+    let fit = |batch: &PointBatch| {
+        let scores = gpu.score_hypotheses(batch, hyp, dist)?;
+        Ok(cpu::ransac::fits_from_scores(batch, &scores, hyp, dist))
+    };
+    let (polygons, stages) =
+        finish(depth, out.smoothed, out.normals, &out.class, intr, cfg, fit, &mut times, &mut lap)?;
+    times.total = t0.elapsed().as_secs_f64() * 1e3;
+    Ok((FramePolygons { stamp_ns: frame.stamp_ns, polygons }, stages, times))
+}
+
+/// The stages after the per-pixel ones, shared by both backends: hysteresis, depth
+/// steps and closing, regions, plane fits (`fit` is the backend's), polygons.
+#[allow(clippy::too_many_arguments)]
+fn finish(
+    depth: Grid<f32>,
+    smoothed: Grid<f32>,
+    normals: Grid<[f32; 3]>,
+    class: &Grid<u8>,
+    intr: &Intrinsics,
+    cfg: &PipelineConfig,
+    fit: impl FnMut(&PointBatch) -> Result<Vec<Option<PlaneFit>>, ExtractError>,
+    times: &mut StageTimes,
+    lap: &mut impl FnMut() -> f64,
+) -> Result<(Vec<Polygon>, Stages), ExtractError> {
+    let canny = cpu::canny::hysteresis(class);
+    let boundary = cpu::canny::boundary(
+        &canny,
+        &smoothed,
+        cfg.depth_edge_ratio as f32,
+        &normals,
+        cfg.closing_kernel_px,
+        cfg.normal_kernel,
+    );
+    times.edges += lap();
+    let (seg, regions, fits) = segment_and_fit(&depth, &boundary, intr, cfg, fit, times, lap)?;
+    let polygons = build_polygons(&regions, &fits, intr, cfg);
+    times.polygons = lap();
+    Ok((polygons, Stages { depth, smoothed, normals, canny, boundary, labels: seg.labels, regions, fits }))
+}
+
+/// Regions from the boundary map, their planes (`fit` is the batched RANSAC + refit of
+/// the backend), leaks split and fitted again, regions grown back to their true
+/// borders, outlines traced. Times the RANSAC calls as `ransac`, the rest as `contours`.
+pub fn segment_and_fit(
+    depth: &Grid<f32>,
+    boundary: &Grid<u8>,
+    intr: &Intrinsics,
+    cfg: &PipelineConfig,
+    mut fit: impl FnMut(&PointBatch) -> Result<Vec<Option<PlaneFit>>, ExtractError>,
+    times: &mut StageTimes,
+    lap: &mut impl FnMut() -> f64,
+) -> Result<(Segmentation, Vec<Region>, Vec<Option<PlaneFit>>), ExtractError> {
+    let dist = cfg.ransac_inlier_distance_m as f32;
+    let min_ratio = cfg.ransac_min_inlier_ratio;
+    let mut seg = Segmentation::components(boundary, MIN_REGION_PIXELS);
+    let all: Vec<usize> = (0..seg.pixels.len()).collect();
+    let batch = seg.points(&all, depth, intr);
+    times.contours = lap();
+    let mut fits = fit(&batch)?;
+    times.ransac = lap();
+    let pieces = seg.split_leaks(&mut fits, depth, intr, dist, min_ratio, MIN_REGION_PIXELS);
+    let batch = seg.points(&pieces, depth, intr);
+    times.contours += lap();
+    if !pieces.is_empty() {
+        for (r, f) in pieces.iter().zip(fit(&batch)?) {
+            fits[*r] = f;
         }
-        let (u, v) = ((i % depth.width) as f32, (i / depth.width) as f32);
-        per_region[index_of[l]].push([(u - cx) / fx * z, (v - cy) / fy * z, z]);
     }
-    let mut batch = PointBatch::default();
-    for pts in per_region {
-        let start = batch.points.len();
-        batch.points.extend(pts);
-        batch.ranges.push(start..batch.points.len());
-    }
-    batch
+    times.ransac += lap();
+    let accepted: Vec<bool> = fits.iter().map(|f| f.is_some_and(|f| f.inlier_ratio() >= min_ratio)).collect();
+    seg.grow(&fits, &accepted, depth, intr, dist, cfg.region_grow_px);
+    let regions = contours::trace(&seg, cfg.simplify_tolerance_px);
+    times.contours += lap();
+    Ok((seg, regions, fits))
 }
 
 /// Polygons from regions and their plane fits: keep well-supported fits, ray cast the
@@ -227,8 +384,18 @@ pub fn build_polygons(
 ) -> Vec<Polygon> {
     let mut out = Vec::new();
     for (region, fit) in regions.iter().zip(fits) {
-        let Some(fit) = fit else { continue };
+        let Some(fit) = fit else {
+            tracing::debug!("region {} ({} px): no plane fit", region.label, region.pixels);
+            continue;
+        };
         if fit.inlier_ratio() < cfg.ransac_min_inlier_ratio {
+            tracing::debug!(
+                "region {} ({} px): inlier ratio {:.3} below {}",
+                region.label,
+                region.pixels,
+                fit.inlier_ratio(),
+                cfg.ransac_min_inlier_ratio
+            );
             continue;
         }
         let onto_plane = |ring: &[[f32; 2]]| -> Option<Vec<[f64; 3]>> {

@@ -72,14 +72,24 @@ pub const SECTOR_STEP: [(isize, isize); 4] = [(1, 0), (1, 1), (0, 1), (-1, 1)];
 /// Canny edges: 1 where the magnitude is a local maximum across the edge and joins a
 /// pixel at or above `high` through pixels at or above `low` (8-connected).
 pub fn canny(grad: &Grid<(f32, u8)>, low: f32, high: f32) -> Grid<u8> {
-    let (w, h) = (grad.width, grad.height);
-    // 0 = none, 1 = weak, 2 = strong.
-    let mut class = vec![0u8; w * h];
+    hysteresis(&classify(grad, low, high))
+}
+
+/// Non-maximum suppression and the double threshold: 0 none, 1 weak, 2 strong per pixel.
+pub fn classify(grad: &Grid<(f32, u8)>, low: f32, high: f32) -> Grid<u8> {
+    let w = grad.width;
+    let mut class = vec![0u8; w * grad.height];
     class.par_chunks_mut(w).enumerate().for_each(|(v, out)| {
         for u in 0..w {
             out[u] = suppressed_class(grad, u, v, low, high);
         }
     });
+    Grid { width: w, height: grad.height, data: class }
+}
+
+/// Hysteresis: 1 for strong pixels and the weak ones 8-connected to them through weak pixels.
+pub fn hysteresis(class: &Grid<u8>) -> Grid<u8> {
+    let (w, h, class) = (class.width, class.height, &class.data);
     let mut edges = vec![0u8; w * h];
     let mut stack: Vec<usize> = (0..w * h).filter(|&i| class[i] == 2).collect();
     for &i in &stack {
@@ -125,9 +135,20 @@ pub fn suppressed_class(grad: &Grid<(f32, u8)>, u: usize, v: usize, low: f32, hi
 
 /// 1 where the pixel cannot be inside a planar region: the closed edge lines (Canny,
 /// and depth steps to a 4-neighbour larger than `ratio` times the depth), or no normal.
-/// Only the lines are closed: closing the no-normal specks of sensor dropouts would
-/// grow them into blobs that eat the surfaces around them.
-pub fn boundary(canny: &Grid<u8>, depth: &Grid<f32>, ratio: f32, normals: &Grid<[f32; 3]>, closing: u32) -> Grid<u8> {
+/// The lines are closed with the `closing` square. Pixels without a normal are closed
+/// together with the lines only with the small `seal` square: a sensor dropout spoils
+/// a kernel-sized square of normals and breaks the Canny line through it, leaving
+/// narrow channels between the square and the line's ends that regions would leak
+/// through; closing them with the big square would grow clusters of dropouts into
+/// blobs that eat the surfaces around them.
+pub fn boundary(
+    canny: &Grid<u8>,
+    depth: &Grid<f32>,
+    ratio: f32,
+    normals: &Grid<[f32; 3]>,
+    closing: u32,
+    seal: u32,
+) -> Grid<u8> {
     let (w, h) = (depth.width, depth.height);
     let mut lines = vec![0u8; w * h];
     lines.par_chunks_mut(w).enumerate().for_each(|(v, out)| {
@@ -141,6 +162,12 @@ pub fn boundary(canny: &Grid<u8>, depth: &Grid<f32>, ratio: f32, normals: &Grid<
         }
     });
     let closed = close(&Grid { width: w, height: h, data: lines }, closing);
+    let with_holes = Grid {
+        width: w,
+        height: h,
+        data: closed.data.iter().zip(&normals.data).map(|(&l, n)| (l != 0 || *n == [0.0; 3]) as u8).collect(),
+    };
+    let sealed = close(&with_holes, seal);
     // Regions are 8-connected (as contour tracing sees them), so a thin diagonal line
     // would leak: growing each line pixel into its 4-neighbours seals it.
     let mut out = vec![0u8; w * h];
@@ -148,7 +175,7 @@ pub fn boundary(canny: &Grid<u8>, depth: &Grid<f32>, ratio: f32, normals: &Grid<
         for u in 0..w {
             let i = v * w + u;
             let line = closed.data[i] != 0 || any_4_neighbour(u, v, w, h, |j| closed.data[j] != 0);
-            row[u] = (line || normals.data[i] == [0.0; 3]) as u8;
+            row[u] = (line || sealed.data[i] != 0) as u8;
         }
     });
     Grid { width: w, height: h, data: out }

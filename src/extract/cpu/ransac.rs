@@ -136,10 +136,20 @@ pub fn refit(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32) -> Option<Plan
 /// RANSAC then refit for every region: the whole CPU stage.
 pub fn fit_planes(batch: &PointBatch, hypotheses: u32, inlier_distance: f32) -> Vec<Option<PlaneFit>> {
     let scores = score_hypotheses(batch, hypotheses, inlier_distance);
+    fits_from_scores(batch, &scores, hypotheses, inlier_distance)
+}
+
+/// Each region's best hypothesis, refitted on its inliers (from either twin's scores).
+pub fn fits_from_scores(
+    batch: &PointBatch,
+    scores: &[u32],
+    hypotheses: u32,
+    inlier_distance: f32,
+) -> Vec<Option<PlaneFit>> {
     (0..batch.ranges.len())
         .into_par_iter()
         .map(|r| {
-            let (n, d) = best_hypothesis(batch, &scores, r, hypotheses)?;
+            let (n, d) = best_hypothesis(batch, scores, r, hypotheses)?;
             refit(&batch.points[batch.ranges[r].clone()], n, d, inlier_distance)
         })
         .collect()

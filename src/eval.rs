@@ -1,0 +1,223 @@
+//! Single-frame accuracy against a sequence's truth, with the metrics of
+//! ../shared/REFERENCE.md: per tread in view, alpha (its fitted normal against world
+//! +z), IOU of the polygon against the tread's pixels in labels/, and step-height error
+//! between consecutive treads found in the same frame.
+//!
+//! IOU is measured in the image: the polygon (outline minus holes) is projected and
+//! filled, then compared with the label mask of the tread, which is exactly the part of
+//! the truth polygon the camera sees.
+
+use nalgebra::{Isometry3, Point3};
+use serde::Serialize;
+
+use crate::extract::Polygon;
+use crate::sequence::Truth;
+use crate::types::Intrinsics;
+
+/// A tread in view with fewer visible pixels than this, at 640x480, is not scored
+/// (the bar; scaled by image area for other sizes).
+pub const MIN_VISIBLE_PIXELS_640: usize = 2000;
+
+/// How one tread of one frame came out.
+#[derive(Clone, Debug, Serialize)]
+pub struct TreadScore {
+    pub frame: usize,
+    /// Step index of the tread (the landing counts as the top step).
+    pub step: u32,
+    pub visible_pixels: usize,
+    /// Whether a polygon covers it with IOU at least `FOUND_IOU`.
+    pub found: bool,
+    pub iou: f64,
+    /// Angle of the polygon's world normal to +z, degrees (when found).
+    pub alpha_deg: Option<f64>,
+    /// World z of the polygon's centroid, m (when found).
+    pub height: Option<f64>,
+}
+
+/// A polygon counts as the tread when it overlaps it at least this much.
+pub const FOUND_IOU: f64 = 0.5;
+
+/// Minimum visible pixels for a tread to be scored in an image of `pixel_count` pixels.
+pub fn min_visible_pixels(pixel_count: usize) -> usize {
+    MIN_VISIBLE_PIXELS_640 * pixel_count / (640 * 480)
+}
+
+/// Scores one frame: `polygons` in the camera frame, `t_world_camera` its pose, `labels`
+/// its truth label image (1-based indices into `truth.polygons`).
+pub fn score_frame(
+    frame: usize,
+    polygons: &[Polygon],
+    t_world_camera: &Isometry3<f64>,
+    labels: &[u16],
+    truth: &Truth,
+    intr: &Intrinsics,
+) -> Vec<TreadScore> {
+    let masks: Vec<Vec<bool>> = polygons.iter().map(|p| polygon_mask(p, intr)).collect();
+    let min_pixels = min_visible_pixels(intr.pixel_count());
+    let mut scores = Vec::new();
+    for (index, t) in truth.polygons.iter().enumerate() {
+        let (Some(step), true) = (t.step, t.label == "tread" || t.label == "landing") else { continue };
+        let label = index as u16 + 1;
+        let visible_pixels = labels.iter().filter(|&&l| l == label).count();
+        if visible_pixels < min_pixels {
+            continue;
+        }
+        // The polygon that overlaps the tread best.
+        let best = masks.iter().enumerate().map(|(k, m)| (k, iou(m, labels, label))).max_by(|a, b| a.1.total_cmp(&b.1));
+        let (k, iou) = best.unwrap_or((0, 0.0));
+        let found = iou >= FOUND_IOU;
+        let world = found.then(|| polygons[k].transformed(t_world_camera));
+        scores.push(TreadScore {
+            frame,
+            step,
+            visible_pixels,
+            found,
+            iou,
+            alpha_deg: world.as_ref().map(|p| p.normal[2].clamp(-1.0, 1.0).acos().to_degrees()),
+            height: world.as_ref().map(|p| p.centroid()[2]),
+        });
+    }
+    scores
+}
+
+/// A picture of how the treads were matched: green where polygon and tread agree, red
+/// where a matched polygon covers what is not its tread, blue where the tread is missed.
+pub fn match_image(polygons: &[Polygon], labels: &[u16], truth: &Truth, intr: &Intrinsics) -> image::RgbImage {
+    let (w, h) = (intr.width, intr.height);
+    let mut img = image::RgbImage::new(w, h);
+    for (index, t) in truth.polygons.iter().enumerate() {
+        if !(t.label == "tread" || t.label == "landing") {
+            continue;
+        }
+        let label = index as u16 + 1;
+        let best = polygons
+            .iter()
+            .map(|p| polygon_mask(p, intr))
+            .map(|m| {
+                let s = iou(&m, labels, label);
+                (m, s)
+            })
+            .max_by(|a, b| a.1.total_cmp(&b.1));
+        let mask = best.filter(|(_, s)| *s > 0.0).map(|(m, _)| m);
+        for (i, &l) in labels.iter().enumerate() {
+            let m = mask.as_ref().is_some_and(|m| m[i]);
+            let colour = match (m, l == label) {
+                (true, true) => [40, 170, 60],
+                (true, false) => [220, 40, 40],
+                (false, true) => [40, 80, 230],
+                _ => continue,
+            };
+            img.put_pixel(i as u32 % w, i as u32 / w, image::Rgb(colour));
+        }
+    }
+    img
+}
+
+fn iou(mask: &[bool], labels: &[u16], label: u16) -> f64 {
+    let (mut inter, mut union) = (0usize, 0usize);
+    for (&m, &l) in mask.iter().zip(labels) {
+        let t = l == label;
+        inter += (m && t) as usize;
+        union += (m || t) as usize;
+    }
+    if union == 0 { 0.0 } else { inter as f64 / union as f64 }
+}
+
+/// Pixels whose centre lies inside the polygon (outline minus holes) projected into the image.
+pub fn polygon_mask(p: &Polygon, intr: &Intrinsics) -> Vec<bool> {
+    let project = |ring: &Vec<[f64; 3]>| -> Vec<[f64; 2]> {
+        ring.iter()
+            .map(|v| {
+                let (u, v) = intr.project(&Point3::from(*v));
+                [u, v]
+            })
+            .collect()
+    };
+    let rings: Vec<Vec<[f64; 2]>> = std::iter::once(&p.boundary).chain(&p.holes).map(project).collect();
+    fill_rings(&rings, intr.width as usize, intr.height as usize)
+}
+
+/// Even-odd scanline fill of rings (outline and holes) at pixel centres.
+pub fn fill_rings(rings: &[Vec<[f64; 2]>], width: usize, height: usize) -> Vec<bool> {
+    let mut mask = vec![false; width * height];
+    let mut xs = Vec::new();
+    for v in 0..height {
+        let y = v as f64;
+        xs.clear();
+        for ring in rings {
+            for i in 0..ring.len() {
+                let (a, b) = (ring[i], ring[(i + 1) % ring.len()]);
+                // Half-open in y, so a vertex on the scanline is counted once.
+                if (a[1] <= y) != (b[1] <= y) {
+                    xs.push(a[0] + (y - a[1]) / (b[1] - a[1]) * (b[0] - a[0]));
+                }
+            }
+        }
+        xs.sort_by(f64::total_cmp);
+        for pair in xs.chunks_exact(2) {
+            let from = pair[0].ceil().max(0.0) as usize;
+            let to = (pair[1].floor() as i64).min(width as i64 - 1);
+            for u in from as i64..=to {
+                mask[v * width + u as usize] = true;
+            }
+        }
+    }
+    mask
+}
+
+/// Step-height errors |(z_k - z_{k-1}) - rise| between consecutive treads found in the same frame, m.
+pub fn step_errors(scores: &[TreadScore], rise: f64) -> Vec<f64> {
+    let mut out = Vec::new();
+    for a in scores {
+        for b in scores {
+            if a.frame == b.frame && b.step == a.step + 1 {
+                if let (Some(za), Some(zb)) = (a.height, b.height) {
+                    out.push(((zb - za) - rise).abs());
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Mean and (population) standard deviation; (NaN, NaN) for no values.
+pub fn mean_std(values: &[f64]) -> (f64, f64) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+    (mean, var.sqrt())
+}
+
+/// The summary row of an evaluation.
+#[derive(Clone, Debug, Serialize)]
+pub struct Summary {
+    pub treads_in_view: usize,
+    pub treads_found: usize,
+    pub alpha_mean_deg: f64,
+    pub alpha_std_deg: f64,
+    /// Mean IOU over treads in view (a missed tread counts as its best overlap).
+    pub iou_mean: f64,
+    pub iou_min: f64,
+    pub step_error_mean_mm: f64,
+    pub step_error_std_mm: f64,
+    pub step_pairs: usize,
+}
+
+pub fn summarise(scores: &[TreadScore], rise: f64) -> Summary {
+    let alphas: Vec<f64> = scores.iter().filter_map(|s| s.alpha_deg).collect();
+    let ious: Vec<f64> = scores.iter().map(|s| s.iou).collect();
+    let steps: Vec<f64> = step_errors(scores, rise).iter().map(|e| e * 1e3).collect();
+    let (alpha_mean_deg, alpha_std_deg) = mean_std(&alphas);
+    let (step_error_mean_mm, step_error_std_mm) = mean_std(&steps);
+    Summary {
+        treads_in_view: scores.len(),
+        treads_found: scores.iter().filter(|s| s.found).count(),
+        alpha_mean_deg,
+        alpha_std_deg,
+        iou_mean: mean_std(&ious).0,
+        iou_min: ious.iter().copied().fold(f64::NAN, f64::min),
+        step_error_mean_mm,
+        step_error_std_mm,
+        step_pairs: steps.len(),
+    }
+}

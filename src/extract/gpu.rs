@@ -1,0 +1,368 @@
+//! The GPU half of the image stages and of the batched RANSAC, on wgpu (Vulkan; on a
+//! machine without a GPU, Mesa's lavapipe). Each stage is a WGSL shader in shaders/
+//! mirroring its CPU twin in `cpu/`; the tests hold the two to the same answers.
+//!
+//! One `Gpu` holds the device and the compiled pipelines; image buffers are made for
+//! the first frame of a size and reused. Each stage is submitted on its own and waited
+//! for, so the stage times are real; the readbacks give the intermediate images the
+//! CPU half of the pipeline (hysteresis, closing, regions) works on.
+
+use std::time::Instant;
+
+use wgpu::util::DeviceExt;
+
+use super::Grid;
+use super::cpu::normals::sobel_kernel;
+use super::cpu::ransac::{MAX_SCORE_POINTS, PointBatch};
+use crate::types::Intrinsics;
+
+/// Why the GPU backend could not start or run.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error(
+        "no Vulkan adapter: {0} (is a Vulkan driver installed? without a GPU, Mesa's lavapipe: mesa-vulkan-drivers)"
+    )]
+    NoAdapter(String),
+    #[error("the Vulkan adapter {adapter} would not open a device: {reason}")]
+    NoDevice { adapter: String, reason: String },
+    #[error("a shader did not compile: {0}")]
+    Shader(String),
+    #[error("GPU dispatch failed: {0}")]
+    Dispatch(String),
+    #[error("GPU readback failed: {0}")]
+    Readback(String),
+}
+
+/// A compute pipeline and the layout of its group 0.
+struct Stage {
+    pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+}
+
+/// Buffers for one image size.
+struct ImageBuffers {
+    width: u32,
+    height: u32,
+    depth: [wgpu::Buffer; 2],
+    normals: wgpu::Buffer,
+    magnitude: wgpu::Buffer,
+    sector: wgpu::Buffer,
+    class: wgpu::Buffer,
+}
+
+/// The image stages' outputs, read back.
+pub struct ImageStages {
+    pub smoothed: Grid<f32>,
+    pub normals: Grid<[f32; 3]>,
+    pub gradient: Grid<(f32, u8)>,
+    /// Non-maximum-suppressed double-threshold classes: 0 none, 1 weak, 2 strong.
+    pub class: Grid<u8>,
+    /// Milliseconds: upload, diffusion, normals, edges (gradient + classes + readback).
+    pub times: [f64; 4],
+}
+
+pub struct Gpu {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+    diffusion: Stage,
+    normals: Stage,
+    gradient: Stage,
+    classify: Stage,
+    ransac: Stage,
+    images: Option<ImageBuffers>,
+}
+
+impl Gpu {
+    /// Opens the first Vulkan adapter (a real GPU preferred over a software one).
+    pub fn new() -> Result<Gpu, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+            backends: wgpu::Backends::VULKAN,
+            ..wgpu::InstanceDescriptor::new_without_display_handle()
+        });
+        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let info = adapter.get_info();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("polymap"),
+            required_limits: adapter.limits(),
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::NoDevice { adapter: info.name.clone(), reason: e.to_string() })?;
+        let stage = |source: &str, entry: &str| {
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(entry),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            });
+            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: None,
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+            let layout = pipeline.get_bind_group_layout(0);
+            Stage { pipeline, layout }
+        };
+        let canny = include_str!("../../shaders/canny.wgsl");
+        // A shader the driver rejects is an error to report, not wgpu's default panic.
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let (diffusion, normals, gradient, classify, ransac) = (
+            stage(include_str!("../../shaders/diffusion.wgsl"), "main"),
+            stage(include_str!("../../shaders/normals.wgsl"), "main"),
+            stage(canny, "gradient"),
+            stage(canny, "classify"),
+            stage(include_str!("../../shaders/ransac.wgsl"), "main"),
+        );
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Shader(e.to_string()));
+        }
+        Ok(Gpu { diffusion, normals, gradient, classify, ransac, device, queue, info, images: None })
+    }
+
+    /// Whether the adapter is a software rasteriser (lavapipe, SwiftShader).
+    pub fn is_software(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
+    }
+
+    /// A one-line description of the adapter, for logs.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} ({:?}, {:?}, driver {})",
+            self.info.name, self.info.device_type, self.info.backend, self.info.driver
+        )
+    }
+
+    fn storage(&self, label: &str, bytes: u64) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes.max(4),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    fn uniform(&self, bytes: &[u8]) -> wgpu::Buffer {
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("params"),
+            contents: bytes,
+            usage: wgpu::BufferUsages::UNIFORM,
+        })
+    }
+
+    /// A bind group of (binding, buffer) pairs: only the bindings the entry point uses,
+    /// as its derived layout holds no others.
+    fn bind(&self, stage: &Stage, buffers: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .map(|(i, b)| wgpu::BindGroupEntry { binding: *i, resource: b.as_entire_binding() })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &stage.layout,
+            entries: &entries,
+        })
+    }
+
+    /// Records `dispatches` of one stage each with its bind group, submits, and waits.
+    fn run(&self, stage: &Stage, dispatches: &[(&wgpu::BindGroup, [u32; 2])]) -> Result<(), GpuError> {
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&stage.pipeline);
+            for (group, [x, y]) in dispatches {
+                pass.set_bind_group(0, *group, &[]);
+                pass.dispatch_workgroups(*x, *y, 1);
+            }
+        }
+        self.queue.submit([encoder.finish()]);
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Dispatch(e.to_string()));
+        }
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Dispatch(e.to_string()))?;
+        Ok(())
+    }
+
+    /// Copies `buffer`'s first `bytes` bytes back to the CPU.
+    fn read(&self, buffer: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>, GpuError> {
+        let bytes = bytes.max(4);
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, bytes);
+        self.queue.submit([encoder.finish()]);
+        let slice = staging.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+        rx.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
+        let data = slice.get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?.to_vec();
+        Ok(data)
+    }
+
+    fn images_for(&mut self, width: u32, height: u32) -> &ImageBuffers {
+        if self.images.as_ref().is_none_or(|b| b.width != width || b.height != height) {
+            let n = width as u64 * height as u64;
+            self.images = Some(ImageBuffers {
+                width,
+                height,
+                depth: [self.storage("depth a", n * 4), self.storage("depth b", n * 4)],
+                normals: self.storage("normals", n * 12),
+                magnitude: self.storage("magnitude", n * 4),
+                sector: self.storage("sector", n * 4),
+                class: self.storage("class", n * 4),
+            });
+        }
+        self.images.as_ref().expect("just made")
+    }
+
+    /// Diffusion, normals, and the per-pixel half of Canny for one depth image (m).
+    #[allow(clippy::too_many_arguments)]
+    pub fn image_stages(
+        &mut self,
+        depth: &Grid<f32>,
+        intr: &Intrinsics,
+        iterations: u32,
+        kappa: f32,
+        gamma: f32,
+        kernel: u32,
+        low: f32,
+        high: f32,
+    ) -> Result<ImageStages, GpuError> {
+        let (w, h) = (depth.width as u32, depth.height as u32);
+        let n = w as u64 * h as u64;
+        let groups = [w.div_ceil(16), h.div_ceil(16)];
+        let mut lap = {
+            let mut last = Instant::now();
+            move || {
+                let now = Instant::now();
+                let ms = (now - last).as_secs_f64() * 1e3;
+                last = now;
+                ms
+            }
+        };
+        self.images_for(w, h);
+        let b = self.images.as_ref().expect("made above");
+        self.queue.write_buffer(&b.depth[0], 0, bytemuck::cast_slice(&depth.data));
+        let upload = lap();
+
+        let params = self.uniform(bytemuck::cast_slice(&[
+            w.to_le_bytes(),
+            h.to_le_bytes(),
+            (1.0 / kappa).to_le_bytes(),
+            gamma.to_le_bytes(),
+        ]));
+        let forward = self.bind(&self.diffusion, &[(0, &params), (1, &b.depth[0]), (2, &b.depth[1])]);
+        let backward = self.bind(&self.diffusion, &[(0, &params), (1, &b.depth[1]), (2, &b.depth[0])]);
+        let steps: Vec<_> = (0..iterations).map(|k| (if k % 2 == 0 { &forward } else { &backward }, groups)).collect();
+        self.run(&self.diffusion, &steps)?;
+        let smoothed_buf = &b.depth[(iterations % 2) as usize];
+        let diffusion = lap();
+
+        let (smooth, deriv, norm) = sobel_kernel(kernel);
+        let mut weights = [0.0f32; 14];
+        weights[..smooth.len()].copy_from_slice(smooth);
+        weights[7..7 + deriv.len()].copy_from_slice(deriv);
+        let weights = self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("sobel"),
+            contents: bytemuck::cast_slice(&weights),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let f = |x: f64| (x as f32).to_le_bytes();
+        let params = self.uniform(bytemuck::cast_slice(&[
+            w.to_le_bytes(),
+            h.to_le_bytes(),
+            (kernel / 2).to_le_bytes(),
+            norm.to_le_bytes(),
+            f(intr.fx),
+            f(intr.fy),
+            f(intr.cx),
+            f(intr.cy),
+        ]));
+        let group = self.bind(&self.normals, &[(0, &params), (1, smoothed_buf), (2, &weights), (3, &b.normals)]);
+        self.run(&self.normals, &[(&group, groups)])?;
+        let normals_ms = lap();
+
+        let params = self.uniform(bytemuck::cast_slice(&[
+            w.to_le_bytes(),
+            h.to_le_bytes(),
+            low.to_le_bytes(),
+            high.to_le_bytes(),
+        ]));
+        let group = self.bind(&self.gradient, &[(0, &params), (1, &b.normals), (2, &b.magnitude), (3, &b.sector)]);
+        self.run(&self.gradient, &[(&group, groups)])?;
+        let group = self.bind(&self.classify, &[(0, &params), (2, &b.magnitude), (3, &b.sector), (4, &b.class)]);
+        self.run(&self.classify, &[(&group, groups)])?;
+        let edges = lap();
+
+        let grid = |data| Grid { width: w as usize, height: h as usize, data };
+        let smoothed: Vec<f32> = bytemuck::cast_slice(&self.read(smoothed_buf, n * 4)?).to_vec();
+        let normals: Vec<[f32; 3]> = bytemuck::cast_slice::<u8, f32>(&self.read(&b.normals, n * 12)?)
+            .chunks_exact(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect();
+        let magnitude: Vec<f32> = bytemuck::cast_slice(&self.read(&b.magnitude, n * 4)?).to_vec();
+        let sector: Vec<u32> = bytemuck::cast_slice(&self.read(&b.sector, n * 4)?).to_vec();
+        let class: Vec<u32> = bytemuck::cast_slice(&self.read(&b.class, n * 4)?).to_vec();
+        // Readbacks count to the edges stage, the last one.
+        let readback = lap();
+        Ok(ImageStages {
+            smoothed: grid(smoothed),
+            normals: Grid { width: w as usize, height: h as usize, data: normals },
+            gradient: Grid {
+                width: w as usize,
+                height: h as usize,
+                data: magnitude.into_iter().zip(sector).map(|(m, s)| (m, s as u8)).collect(),
+            },
+            class: Grid { width: w as usize, height: h as usize, data: class.into_iter().map(|c| c as u8).collect() },
+            times: [upload, diffusion, normals_ms, edges + readback],
+        })
+    }
+
+    /// Inlier counts of every (region, hypothesis), row-major by region: one dispatch
+    /// for the whole frame, the same numbers as `cpu::ransac::score_hypotheses`.
+    pub fn score_hypotheses(
+        &self,
+        batch: &PointBatch,
+        hypotheses: u32,
+        inlier_distance: f32,
+    ) -> Result<Vec<u32>, GpuError> {
+        let regions = batch.ranges.len() as u32;
+        let total = regions * hypotheses;
+        if total == 0 {
+            return Ok(Vec::new());
+        }
+        let init = |label: &str, contents: &[u8]| {
+            self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: if contents.is_empty() { &[0; 4] } else { contents },
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let points = init("points", bytemuck::cast_slice(&batch.points));
+        let ranges: Vec<[u32; 2]> = batch.ranges.iter().map(|r| [r.start as u32, (r.end - r.start) as u32]).collect();
+        let ranges = init("ranges", bytemuck::cast_slice(&ranges));
+        let scores = self.storage("scores", total as u64 * 4);
+        let params = self.uniform(bytemuck::cast_slice(&[
+            hypotheses.to_le_bytes(),
+            regions.to_le_bytes(),
+            inlier_distance.to_le_bytes(),
+            (MAX_SCORE_POINTS as u32).to_le_bytes(),
+        ]));
+        let group = self.bind(&self.ransac, &[(0, &params), (1, &points), (2, &ranges), (3, &scores)]);
+        // At most 65535 workgroups per dimension: wrap into y.
+        self.run(&self.ransac, &[(&group, [total.min(65535), total.div_ceil(65535)])])?;
+        Ok(bytemuck::cast_slice(&self.read(&scores, total as u64 * 4)?).to_vec())
+    }
+}

@@ -1,0 +1,242 @@
+//! Regions of one frame and their plane-driven clean-up, between the edge map and the
+//! polygons (CPU, for both backends).
+//!
+//! Edges alone segment imperfectly: a Canny line broken by a sensor dropout lets two
+//! surfaces leak into one region, and the edge lines, their closing and the squares of
+//! normals spoiled by dropouts eat a band of pixels along every region's border, which
+//! would shrink every polygon by a pixel or two. Once the planes are fitted both are
+//! mended with the planes themselves:
+//! - `split_leaks`: a region whose plane fits too few of its points keeps the largest
+//!   connected patch of that plane's inliers; the rest becomes new regions, fitted again;
+//! - `grow`: regions take back, wave by wave, the border pixels whose raw 3-D point lies
+//!   within the inlier distance of their plane, the nearest plane winning where two meet.
+
+use nalgebra::Vector3;
+use rayon::prelude::*;
+
+use super::Grid;
+use super::cpu::ransac::{PlaneFit, PointBatch, refit};
+use crate::types::Intrinsics;
+
+/// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
+#[derive(Clone, Debug)]
+pub struct Segmentation {
+    pub labels: Grid<u32>,
+    /// Pixel indices of each region, ascending.
+    pub pixels: Vec<Vec<u32>>,
+}
+
+impl Segmentation {
+    /// 8-connected components of the pixels where `boundary` is 0, those with at least
+    /// `min_pixels` pixels becoming regions in scan order.
+    pub fn components(boundary: &Grid<u8>, min_pixels: usize) -> Segmentation {
+        let free: Vec<bool> = boundary.data.iter().map(|&b| b == 0).collect();
+        let mut seg = Segmentation {
+            labels: Grid { width: boundary.width, height: boundary.height, data: vec![0; free.len()] },
+            pixels: Vec::new(),
+        };
+        let mut seen = vec![false; free.len()];
+        for start in 0..free.len() {
+            if free[start] && !seen[start] {
+                let comp = flood(start, boundary.width, boundary.height, &mut seen, |i| free[i]);
+                if comp.len() >= min_pixels {
+                    seg.push(comp);
+                }
+            }
+        }
+        seg
+    }
+
+    /// Adds a region of these pixels (sorted here), returning its index.
+    fn push(&mut self, mut pixels: Vec<u32>) -> usize {
+        pixels.sort_unstable();
+        let label = self.pixels.len() as u32 + 1;
+        for &i in &pixels {
+            self.labels.data[i as usize] = label;
+        }
+        self.pixels.push(pixels);
+        self.pixels.len() - 1
+    }
+
+    /// Camera-frame points (raw depth, valid pixels only) of the given regions, in that order.
+    pub fn points(&self, regions: &[usize], depth: &Grid<f32>, intr: &Intrinsics) -> PointBatch {
+        let mut batch = PointBatch::default();
+        for &r in regions {
+            let start = batch.points.len();
+            batch.points.extend(self.pixels[r].iter().filter_map(|&i| point(i as usize, depth, intr)));
+            batch.ranges.push(start..batch.points.len());
+        }
+        batch
+    }
+
+    /// Splits every region whose fit has an inlier ratio under `min_ratio`: it keeps the
+    /// largest 8-connected patch of its plane's inliers, refitted; the other connected
+    /// pieces of at least `min_pixels` become new regions (returned, their fits None).
+    pub fn split_leaks(
+        &mut self,
+        fits: &mut Vec<Option<PlaneFit>>,
+        depth: &Grid<f32>,
+        intr: &Intrinsics,
+        dist: f32,
+        min_ratio: f64,
+        min_pixels: usize,
+    ) -> Vec<usize> {
+        let (w, h) = (self.labels.width, self.labels.height);
+        let mut new_regions = Vec::new();
+        for r in 0..self.pixels.len() {
+            let Some(fit) = fits[r] else { continue };
+            if fit.inlier_ratio() >= min_ratio {
+                continue;
+            }
+            let label = r as u32 + 1;
+            let inlier = |i: usize| {
+                self.labels.data[i] == label && point(i, depth, intr).is_some_and(|p| fit.distance(&p) < dist as f64)
+            };
+            let mut seen = vec![false; w * h];
+            let mut best: Vec<u32> = Vec::new();
+            for &i in &self.pixels[r] {
+                if !seen[i as usize] && inlier(i as usize) {
+                    let comp = flood(i as usize, w, h, &mut seen, inlier);
+                    if comp.len() > best.len() {
+                        best = comp;
+                    }
+                }
+            }
+            // Everything else in the region is released, then its pieces regrouped.
+            let old = std::mem::take(&mut self.pixels[r]);
+            for &i in &old {
+                self.labels.data[i as usize] = 0;
+            }
+            best.sort_unstable();
+            for &i in &best {
+                self.labels.data[i as usize] = label;
+            }
+            let pts: Vec<[f32; 3]> = best.iter().filter_map(|&i| point(i as usize, depth, intr)).collect();
+            fits[r] = refit(&pts, fit.normal_f32(), fit.offset as f32, dist);
+            self.pixels[r] = best;
+            let mut seen = vec![false; w * h];
+            for &i in &old {
+                let i = i as usize;
+                if self.labels.data[i] == 0 && !seen[i] {
+                    let piece = flood(i, w, h, &mut seen, |j| {
+                        self.labels.data[j] == 0 && old.binary_search(&(j as u32)).is_ok()
+                    });
+                    if piece.len() >= min_pixels {
+                        new_regions.push(self.push(piece));
+                        fits.push(None);
+                    }
+                }
+            }
+        }
+        new_regions
+    }
+
+    /// Grows every region with an accepted fit (`accepted[r]`) into unlabelled pixels,
+    /// `waves` pixels deep: a pixel joins the 4-neighbouring region whose plane is
+    /// nearest to its raw 3-D point, if within `dist`. Each wave reads the labels of the
+    /// one before, so the result does not depend on scan order.
+    pub fn grow(
+        &mut self,
+        fits: &[Option<PlaneFit>],
+        accepted: &[bool],
+        depth: &Grid<f32>,
+        intr: &Intrinsics,
+        dist: f32,
+        waves: u32,
+    ) {
+        let (w, h) = (self.labels.width, self.labels.height);
+        for _ in 0..waves {
+            let labels = &self.labels.data;
+            let joins: Vec<(u32, u32)> = (0..h)
+                .into_par_iter()
+                .flat_map_iter(|v| {
+                    (0..w).filter_map(move |u| {
+                        let i = v * w + u;
+                        if labels[i] != 0 {
+                            return None;
+                        }
+                        let p = point(i, depth, intr)?;
+                        let mut best: Option<(f64, u32)> = None;
+                        for j in [
+                            (u > 0).then(|| i - 1),
+                            (u + 1 < w).then(|| i + 1),
+                            (v > 0).then(|| i - w),
+                            (v + 1 < h).then(|| i + w),
+                        ]
+                        .into_iter()
+                        .flatten()
+                        {
+                            let l = labels[j];
+                            if l == 0 || !accepted[l as usize - 1] {
+                                continue;
+                            }
+                            let Some(fit) = &fits[l as usize - 1] else { continue };
+                            let e = fit.distance(&p);
+                            if e < dist as f64 && best.is_none_or(|(b, bl)| e < b || (e == b && l < bl)) {
+                                best = Some((e, l));
+                            }
+                        }
+                        best.map(|(_, l)| (i as u32, l))
+                    })
+                })
+                .collect();
+            if joins.is_empty() {
+                break;
+            }
+            for (i, l) in joins {
+                self.labels.data[i as usize] = l;
+                self.pixels[l as usize - 1].push(i);
+            }
+        }
+        self.pixels.iter_mut().for_each(|p| p.sort_unstable());
+    }
+}
+
+/// Raw camera-frame point of pixel i, None where the depth is invalid.
+#[inline]
+fn point(i: usize, depth: &Grid<f32>, intr: &Intrinsics) -> Option<[f32; 3]> {
+    let z = depth.data[i];
+    if z == 0.0 {
+        return None;
+    }
+    let (u, v) = ((i % depth.width) as f64, (i / depth.width) as f64);
+    Some([((u - intr.cx) / intr.fx) as f32 * z, ((v - intr.cy) / intr.fy) as f32 * z, z])
+}
+
+/// The 8-connected set of pixels reachable from `start` through pixels where `inside`
+/// holds, marking them in `seen`.
+fn flood(start: usize, w: usize, h: usize, seen: &mut [bool], inside: impl Fn(usize) -> bool) -> Vec<u32> {
+    let mut out = Vec::new();
+    let mut stack = vec![start];
+    seen[start] = true;
+    while let Some(i) = stack.pop() {
+        out.push(i as u32);
+        let (u, v) = ((i % w) as isize, (i / w) as isize);
+        for dv in -1..=1 {
+            for du in -1..=1 {
+                let (nu, nv) = (u + du, v + dv);
+                if nu < 0 || nv < 0 || nu >= w as isize || nv >= h as isize {
+                    continue;
+                }
+                let j = nv as usize * w + nu as usize;
+                if !seen[j] && inside(j) {
+                    seen[j] = true;
+                    stack.push(j);
+                }
+            }
+        }
+    }
+    out
+}
+
+impl PlaneFit {
+    /// Distance of a point to the plane, m.
+    #[inline]
+    pub fn distance(&self, p: &[f32; 3]) -> f64 {
+        (self.normal.dot(&Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64)) + self.offset).abs()
+    }
+
+    pub fn normal_f32(&self) -> [f32; 3] {
+        [self.normal.x as f32, self.normal.y as f32, self.normal.z as f32]
+    }
+}

@@ -1,0 +1,133 @@
+//! The GPU twin against the CPU twin, stage by stage, on every mock sequence.
+//!
+//! These run on whatever Vulkan adapter there is: a real GPU, or Mesa's lavapipe on a
+//! machine without one. With CI=true a missing adapter fails the test; elsewhere the
+//! test says why it did not run and passes, so a laptop without Vulkan can still run
+//! the rest of the suite.
+
+use std::sync::{Mutex, OnceLock};
+
+use nalgebra::Vector3;
+use polymap::config::PipelineConfig;
+use polymap::extract::cpu::{canny, diffusion, normals, ransac};
+use polymap::extract::gpu::Gpu;
+use polymap::extract::{Grid, depth_metres, extract_cpu, extract_gpu};
+use polymap::sequence::Sequence;
+
+/// One device for the whole test binary: opening one costs more than a frame.
+fn gpu() -> Option<&'static Mutex<Gpu>> {
+    static GPU: OnceLock<Option<Mutex<Gpu>>> = OnceLock::new();
+    GPU.get_or_init(|| match Gpu::new() {
+        Ok(g) => {
+            eprintln!("GPU twin on {}", g.describe());
+            Some(Mutex::new(g))
+        }
+        Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => panic!("CI=true and no GPU adapter: {e}"),
+        Err(e) => {
+            eprintln!("skipping the GPU twin tests (set CI=true to make this a failure): {e}");
+            None
+        }
+    })
+    .as_ref()
+}
+
+/// Frames of every mock sequence, every `step`-th.
+fn mock_frames(step: usize) -> Vec<(String, Sequence, usize)> {
+    let mut out = Vec::new();
+    for name in ["straight_320", "spiral_320", "straight_640"] {
+        let seq = Sequence::open(format!("mock_frames/{name}")).unwrap();
+        for k in (0..seq.len()).step_by(step) {
+            out.push((name.to_string(), seq.clone(), k));
+        }
+    }
+    out
+}
+
+fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+}
+
+#[test]
+fn image_stages_agree_with_the_cpu_twin_on_every_mock_sequence() {
+    let Some(gpu) = gpu() else { return };
+    let mut gpu = gpu.lock().unwrap();
+    let cfg = PipelineConfig::default();
+    for (name, seq, k) in mock_frames(5) {
+        let depth = depth_metres(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
+        let g = gpu.image_stages(&depth, &seq.intrinsics, 60, cfg.diffusion_kappa_m as f32, 0.2, 5, 0.05, 0.1).unwrap();
+        let smoothed = diffusion::diffuse(&depth, 60, cfg.diffusion_kappa_m as f32, 0.2);
+        let d = max_abs_diff(&g.smoothed.data, &smoothed.data);
+        assert!(d <= 1e-4, "{name} frame {k}: diffusion differs by {d} m");
+        // Zeros (invalid) must agree exactly: holes are never filled by either twin.
+        assert!(g.smoothed.data.iter().zip(&smoothed.data).all(|(a, b)| (*a == 0.0) == (*b == 0.0)));
+
+        let n = normals::normals(&smoothed, &seq.intrinsics, 5);
+        let flat = |g: &Grid<[f32; 3]>| g.data.iter().flatten().copied().collect::<Vec<f32>>();
+        let d = max_abs_diff(&flat(&g.normals), &flat(&n));
+        assert!(d <= 1e-4, "{name} frame {k}: normals differ by {d}");
+
+        // Edges from each twin's own inputs, as the pipelines run them.
+        let cpu_edges = canny::canny(&canny::normal_gradient(&n), 0.05, 0.1);
+        let gpu_edges = canny::hysteresis(&g.class);
+        let differ = cpu_edges.data.iter().zip(&gpu_edges.data).filter(|(a, b)| a != b).count();
+        let share = differ as f64 / cpu_edges.data.len() as f64;
+        assert!(share < 0.005, "{name} frame {k}: edge maps differ in {:.3} % of pixels", share * 100.0);
+        assert!(cpu_edges.data.iter().any(|&e| e != 0), "{name} frame {k}: the stairs have edges");
+    }
+}
+
+#[test]
+fn whole_frames_give_the_same_polygons_on_both_twins() {
+    let Some(gpu) = gpu() else { return };
+    let mut gpu = gpu.lock().unwrap();
+    let cfg = PipelineConfig::default();
+    let mut compared = 0;
+    for (name, seq, k) in mock_frames(5) {
+        let frame = seq.depth(k).unwrap();
+        let (c, _, _) = extract_cpu(&frame, &seq.intrinsics, &cfg).unwrap();
+        let (g, _, _) = extract_gpu(&mut gpu, &frame, &seq.intrinsics, &cfg).unwrap();
+        assert_eq!(c.polygons.len(), g.polygons.len(), "{name} frame {k}: polygon counts");
+        for (a, b) in c.polygons.iter().zip(&g.polygons) {
+            let angle = Vector3::from(a.normal).angle(&Vector3::from(b.normal)).to_degrees();
+            assert!(angle <= 0.2, "{name} frame {k} polygon {}: normals {angle} deg apart", a.id);
+            assert!((a.offset - b.offset).abs() <= 0.002, "{name} frame {k} polygon {}: offsets", a.id);
+            let (ca, cb) = (a.centroid(), b.centroid());
+            let shift = (Vector3::from(ca) - Vector3::from(cb)).norm();
+            assert!(shift <= 0.002, "{name} frame {k} polygon {}: centroids {shift} m apart", a.id);
+            compared += 1;
+        }
+    }
+    assert!(compared > 50, "only {compared} polygons compared");
+}
+
+#[test]
+fn batched_scores_match_the_cpu_scores_exactly_on_planted_planes() {
+    let Some(gpu) = gpu() else { return };
+    let gpu = gpu.lock().unwrap();
+    // Several regions of very different sizes (3 points up to past the scoring cap), and an empty one.
+    let mut batch = ransac::PointBatch::default();
+    let mut state = 7u32;
+    let mut rnd = || {
+        state = ransac::hash(state);
+        state as f32 / u32::MAX as f32
+    };
+    for (r, n) in [3usize, 40, 1000, 5000, 0, 12000].into_iter().enumerate() {
+        let start = batch.points.len();
+        for k in 0..n {
+            let (s, t) = (rnd() - 0.5, rnd() - 0.5);
+            let off = if k % 7 == 0 { 0.1 * rnd() } else { 0.002 * (rnd() - 0.5) };
+            batch.points.push([s, t * 0.8 + off * 0.6, 1.0 + r as f32 * 0.1 + t * 0.6 - off * 0.8]);
+        }
+        batch.ranges.push(start..batch.points.len());
+    }
+    let cpu = ransac::score_hypotheses(&batch, 20, 0.01);
+    let g = gpu.score_hypotheses(&batch, 20, 0.01).unwrap();
+    assert_eq!(cpu.len(), 120);
+    // Points within float rounding of the inlier distance may count differently.
+    for (k, (a, b)) in cpu.iter().zip(&g).enumerate() {
+        assert!(a.abs_diff(*b) <= 2, "region {} hypothesis {}: cpu {a} gpu {b}", k / 20, k % 20);
+    }
+    assert!(cpu[2 * 20..3 * 20].iter().any(|&s| s > 800), "the 1000-point plane has a good hypothesis");
+    assert!(g[4 * 20..5 * 20].iter().all(|&s| s == 0), "an empty region scores nothing");
+}
