@@ -5,6 +5,7 @@
 //! see README.md for the picture and `../shared/DESIGN.md` for the conventions
 //! (metres, radians, nanosecond stamps, `T_a_b` maps frame b into frame a).
 
+pub mod bench;
 pub mod config;
 pub mod eval;
 pub mod extract;

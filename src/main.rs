@@ -91,6 +91,21 @@ enum Command {
         #[arg(long)]
         debug: Option<PathBuf>,
     },
+    /// Time extraction per stage over many frames (looping the sequence): median, p99, fps
+    Bench {
+        seq: PathBuf,
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
+        /// Frames to time (the sequence is looped); at least 300 for a p99 worth reading
+        #[arg(long, default_value_t = 300)]
+        frames: usize,
+        /// Pipeline settings from this config file (default: the built-in defaults)
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Print the numbers as JSON
+        #[arg(long)]
+        json: bool,
+    },
     /// Check a config file and print it with every default filled in
     Config { file: PathBuf },
 }
@@ -168,6 +183,10 @@ fn run(cli: Cli) -> Result<()> {
         Command::Eval { seq, config, json, backend, debug } => {
             let config = load_config(config, backend)?;
             evaluate(&Sequence::open(&seq)?, &config, json, debug.as_deref())?;
+        }
+        Command::Bench { seq, backend, frames, config, json } => {
+            let config = load_config(config, backend)?;
+            bench(&Sequence::open(&seq)?, &config, frames, json)?;
         }
         Command::Config { file } => {
             let config = Config::load(&file)?;
@@ -263,6 +282,52 @@ fn evaluate(s: &Sequence, config: &Config, json: bool, debug: Option<&Path>) -> 
         m.step_error_std_mm,
         m.step_pairs
     );
+    Ok(())
+}
+
+/// `polymap bench SEQ`: frames are read once, then extracted in a loop and timed.
+fn bench(s: &Sequence, config: &Config, frames: usize, json: bool) -> Result<()> {
+    if s.is_empty() || frames == 0 {
+        bail!("nothing to time: {} frames, --frames {frames}", s.len());
+    }
+    let depth: Vec<_> = (0..s.len()).map(|k| s.depth(k)).collect::<Result<_, _>>()?;
+    let mut extractor = extract::Extractor::new(&config.pipeline)?;
+    // Warm-up: shader compilation, buffer allocation, the auto backend's choice.
+    extractor.extract(&depth[0], &s.intrinsics)?;
+    let bar = progress(frames as u64, "bench");
+    let started = std::time::Instant::now();
+    let mut times = Vec::with_capacity(frames);
+    for k in 0..frames {
+        times.push(extractor.extract(&depth[k % depth.len()], &s.intrinsics)?.2);
+        bar.inc(1);
+    }
+    let wall = started.elapsed().as_secs_f64();
+    bar.finish_and_clear();
+    let stages = polymap::bench::stage_spreads(&times);
+    let device = match &extractor.engine {
+        extract::Engine::Gpu(g) => g.describe(),
+        extract::Engine::Cpu => format!("CPU twin, {} threads", rayon::current_num_threads()),
+    };
+    let (w, h) = (s.intrinsics.width, s.intrinsics.height);
+    let fps = frames as f64 / wall;
+    if json {
+        let per_stage: serde_json::Map<String, serde_json::Value> =
+            stages.iter().map(|(n, sp)| (n.to_string(), serde_json::to_value(sp).expect("plain numbers"))).collect();
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "sequence": s.dir, "width": w, "height": h, "frames": frames,
+                "backend": extractor.backend(), "device": device, "fps": fps, "stages_ms": per_stage,
+            }))?
+        );
+        return Ok(());
+    }
+    println!("{}: {frames} frames {w}x{h}, backend {} on {device}", s.dir.display(), extractor.backend());
+    println!("{:>10} {:>10} {:>10}", "stage", "median ms", "p99 ms");
+    for (name, sp) in &stages {
+        println!("{name:>10} {:>10.3} {:>10.3}", sp.median, sp.p99);
+    }
+    println!("{fps:.1} frames per second end to end");
     Ok(())
 }
 
