@@ -232,6 +232,32 @@ impl Extractor {
     }
 }
 
+/// The 8-connected set of pixels reachable from `start` through pixels where `inside`
+/// holds, marking them in `seen`.
+pub fn flood(start: usize, w: usize, h: usize, seen: &mut [bool], inside: impl Fn(usize) -> bool) -> Vec<u32> {
+    let mut out = Vec::new();
+    let mut stack = vec![start];
+    seen[start] = true;
+    while let Some(i) = stack.pop() {
+        out.push(i as u32);
+        let (u, v) = ((i % w) as isize, (i / w) as isize);
+        for dv in -1..=1 {
+            for du in -1..=1 {
+                let (nu, nv) = (u + du, v + dv);
+                if nu < 0 || nv < 0 || nu >= w as isize || nv >= h as isize {
+                    continue;
+                }
+                let j = nv as usize * w + nu as usize;
+                if !seen[j] && inside(j) {
+                    seen[j] = true;
+                    stack.push(j);
+                }
+            }
+        }
+    }
+    out
+}
+
 /// Milliseconds since the last call, for stage times.
 fn stopwatch() -> impl FnMut() -> f64 {
     let mut last = Instant::now();

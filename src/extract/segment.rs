@@ -14,8 +14,8 @@
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
-use super::Grid;
 use super::cpu::ransac::{PlaneFit, PointBatch, refit};
+use super::{Grid, flood};
 use crate::types::Intrinsics;
 
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
@@ -201,32 +201,6 @@ fn point(i: usize, depth: &Grid<f32>, intr: &Intrinsics) -> Option<[f32; 3]> {
     }
     let (u, v) = ((i % depth.width) as f64, (i / depth.width) as f64);
     Some([((u - intr.cx) / intr.fx) as f32 * z, ((v - intr.cy) / intr.fy) as f32 * z, z])
-}
-
-/// The 8-connected set of pixels reachable from `start` through pixels where `inside`
-/// holds, marking them in `seen`.
-fn flood(start: usize, w: usize, h: usize, seen: &mut [bool], inside: impl Fn(usize) -> bool) -> Vec<u32> {
-    let mut out = Vec::new();
-    let mut stack = vec![start];
-    seen[start] = true;
-    while let Some(i) = stack.pop() {
-        out.push(i as u32);
-        let (u, v) = ((i % w) as isize, (i / w) as isize);
-        for dv in -1..=1 {
-            for du in -1..=1 {
-                let (nu, nv) = (u + du, v + dv);
-                if nu < 0 || nv < 0 || nu >= w as isize || nv >= h as isize {
-                    continue;
-                }
-                let j = nv as usize * w + nu as usize;
-                if !seen[j] && inside(j) {
-                    seen[j] = true;
-                    stack.push(j);
-                }
-            }
-        }
-    }
-    out
 }
 
 impl PlaneFit {

@@ -9,7 +9,7 @@
 
 use rayon::prelude::*;
 
-use crate::extract::Grid;
+use crate::extract::{Grid, flood};
 
 const SOBEL_S: [f32; 3] = [1.0, 2.0, 1.0];
 const SOBEL_D: [f32; 3] = [-1.0, 0.0, 1.0];
@@ -89,29 +89,14 @@ pub fn classify(grad: &Grid<(f32, u8)>, low: f32, high: f32) -> Grid<u8> {
 
 /// Hysteresis: 1 for strong pixels and the weak ones 8-connected to them through weak pixels.
 pub fn hysteresis(class: &Grid<u8>) -> Grid<u8> {
-    let (w, h, class) = (class.width, class.height, &class.data);
-    let mut edges = vec![0u8; w * h];
-    let mut stack: Vec<usize> = (0..w * h).filter(|&i| class[i] == 2).collect();
-    for &i in &stack {
-        edges[i] = 1;
-    }
-    while let Some(i) = stack.pop() {
-        let (u, v) = ((i % w) as isize, (i / w) as isize);
-        for dv in -1..=1 {
-            for du in -1..=1 {
-                let (nu, nv) = (u + du, v + dv);
-                if nu < 0 || nv < 0 || nu >= w as isize || nv >= h as isize {
-                    continue;
-                }
-                let j = nv as usize * w + nu as usize;
-                if class[j] == 1 && edges[j] == 0 {
-                    edges[j] = 1;
-                    stack.push(j);
-                }
-            }
+    let (w, h) = (class.width, class.height);
+    let mut reached = vec![false; w * h];
+    for i in 0..w * h {
+        if class.data[i] == 2 && !reached[i] {
+            flood(i, w, h, &mut reached, |j| class.data[j] != 0);
         }
     }
-    Grid { width: w, height: h, data: edges }
+    Grid { width: w, height: h, data: reached.into_iter().map(u8::from).collect() }
 }
 
 /// 0, 1 (weak) or 2 (strong) for pixel (u, v) after non-maximum suppression.
