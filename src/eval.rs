@@ -52,19 +52,16 @@ pub fn score_frame(
     truth: &Truth,
     intr: &Intrinsics,
 ) -> Vec<TreadScore> {
-    let masks: Vec<Vec<bool>> = polygons.iter().map(|p| polygon_mask(p, intr)).collect();
+    let masks = polygon_masks(polygons, intr);
     let min_pixels = min_visible_pixels(intr.pixel_count());
     let mut scores = Vec::new();
-    for (index, t) in truth.polygons.iter().enumerate() {
-        let (Some(step), true) = (t.step, t.label == "tread" || t.label == "landing") else { continue };
-        let label = index as u16 + 1;
+    for (label, t) in treads(truth) {
+        let Some(step) = t.step else { continue };
         let visible_pixels = labels.iter().filter(|&&l| l == label).count();
         if visible_pixels < min_pixels {
             continue;
         }
-        // The polygon that overlaps the tread best.
-        let best = masks.iter().enumerate().map(|(k, m)| (k, iou(m, labels, label))).max_by(|a, b| a.1.total_cmp(&b.1));
-        let (k, iou) = best.unwrap_or((0, 0.0));
+        let (k, iou) = best_match(&masks, labels, label);
         let found = iou >= FOUND_IOU;
         let world = found.then(|| polygons[k].transformed(t_world_camera));
         scores.push(TreadScore {
@@ -85,22 +82,12 @@ pub fn score_frame(
 pub fn match_image(polygons: &[Polygon], labels: &[u16], truth: &Truth, intr: &Intrinsics) -> image::RgbImage {
     let (w, h) = (intr.width, intr.height);
     let mut img = image::RgbImage::new(w, h);
-    for (index, t) in truth.polygons.iter().enumerate() {
-        if !(t.label == "tread" || t.label == "landing") {
-            continue;
-        }
-        let label = index as u16 + 1;
-        let best = polygons
-            .iter()
-            .map(|p| polygon_mask(p, intr))
-            .map(|m| {
-                let s = iou(&m, labels, label);
-                (m, s)
-            })
-            .max_by(|a, b| a.1.total_cmp(&b.1));
-        let mask = best.filter(|(_, s)| *s > 0.0).map(|(m, _)| m);
+    let masks = polygon_masks(polygons, intr);
+    for (label, _) in treads(truth) {
+        let (k, score) = best_match(&masks, labels, label);
+        let mask = (score > 0.0).then(|| &masks[k]);
         for (i, &l) in labels.iter().enumerate() {
-            let m = mask.as_ref().is_some_and(|m| m[i]);
+            let m = mask.is_some_and(|m| m[i]);
             let colour = match (m, l == label) {
                 (true, true) => [40, 170, 60],
                 (true, false) => [220, 40, 40],
@@ -111,6 +98,30 @@ pub fn match_image(polygons: &[Polygon], labels: &[u16], truth: &Truth, intr: &I
         }
     }
     img
+}
+
+/// The stepping surfaces of the truth (treads and the landing) with their label values.
+fn treads(truth: &Truth) -> impl Iterator<Item = (u16, &crate::sequence::TruthPolygon)> {
+    truth
+        .polygons
+        .iter()
+        .enumerate()
+        .filter(|(_, t)| t.label == "tread" || t.label == "landing")
+        .map(|(index, t)| (index as u16 + 1, t))
+}
+
+fn polygon_masks(polygons: &[Polygon], intr: &Intrinsics) -> Vec<Vec<bool>> {
+    polygons.iter().map(|p| polygon_mask(p, intr)).collect()
+}
+
+/// The polygon that overlaps the pixels of `label` best, and its IOU ((0, 0.0) for none).
+fn best_match(masks: &[Vec<bool>], labels: &[u16], label: u16) -> (usize, f64) {
+    masks
+        .iter()
+        .enumerate()
+        .map(|(k, m)| (k, iou(m, labels, label)))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or((0, 0.0))
 }
 
 fn iou(mask: &[bool], labels: &[u16], label: u16) -> f64 {

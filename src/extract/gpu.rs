@@ -7,8 +7,6 @@
 //! for, so the stage times are real; the readbacks give the intermediate images the
 //! CPU half of the pipeline (hysteresis, closing, regions) works on.
 
-use std::time::Instant;
-
 use wgpu::util::DeviceExt;
 
 use super::Grid;
@@ -243,15 +241,7 @@ impl Gpu {
         let (w, h) = (depth.width as u32, depth.height as u32);
         let n = w as u64 * h as u64;
         let groups = [w.div_ceil(16), h.div_ceil(16)];
-        let mut lap = {
-            let mut last = Instant::now();
-            move || {
-                let now = Instant::now();
-                let ms = (now - last).as_secs_f64() * 1e3;
-                last = now;
-                ms
-            }
-        };
+        let mut lap = super::stopwatch();
         self.images_for(w, h);
         let b = self.images.as_ref().expect("made above");
         self.queue.write_buffer(&b.depth[0], 0, bytemuck::cast_slice(&depth.data));

@@ -259,7 +259,7 @@ pub fn flood(start: usize, w: usize, h: usize, seen: &mut [bool], inside: impl F
 }
 
 /// Milliseconds since the last call, for stage times.
-fn stopwatch() -> impl FnMut() -> f64 {
+pub(crate) fn stopwatch() -> impl FnMut() -> f64 {
     let mut last = Instant::now();
     move || {
         let now = Instant::now();
