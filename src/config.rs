@@ -213,6 +213,20 @@ pub struct MapConfig {
     pub horizontal_max_tilt_deg: f64,
     /// Planes tilted at least this much are vertical (riser, wall); in between is slope, degrees.
     pub vertical_min_tilt_deg: f64,
+    /// Most vertices a map polygon's outline and holes keep together after a merge.
+    pub max_vertices: usize,
+    /// How far the inset outline (safe footholds) lies inside the polygon, m.
+    pub foot_margin_m: f64,
+    /// Frames in a row that must contradict a map polygon before it is removed.
+    pub clear_after_frames: u32,
+    /// Depth disagreement that counts as seeing through or something else in place, m.
+    pub clear_tolerance_m: f64,
+    /// Where the map is saved (atomically); empty = never saved.
+    pub snapshot_path: PathBuf,
+    /// Seconds between snapshots while running (one more is written at shutdown).
+    pub snapshot_period_s: f64,
+    /// Load `snapshot_path` at start when it exists.
+    pub load_at_start: bool,
 }
 
 impl Default for MapConfig {
@@ -222,10 +236,17 @@ impl Default for MapConfig {
             merge_normal_tolerance_deg: 10.0,
             merge_min_overlap: 0.1,
             drift_filter: true,
-            drift_sigma_p: 4e-5,
-            drift_sigma_m: 1e-4,
+            drift_sigma_p: 4e-6,
+            drift_sigma_m: 1e-6,
             horizontal_max_tilt_deg: 25.0,
             vertical_min_tilt_deg: 65.0,
+            max_vertices: 64,
+            foot_margin_m: 0.05,
+            clear_after_frames: 3,
+            clear_tolerance_m: 0.04,
+            snapshot_path: PathBuf::new(),
+            snapshot_period_s: 5.0,
+            load_at_start: false,
         }
     }
 }
@@ -343,6 +364,11 @@ impl Config {
         check_positive("map.drift_sigma_m", m.drift_sigma_m)?;
         check_range("map.horizontal_max_tilt_deg", m.horizontal_max_tilt_deg, 0.0, 90.0)?;
         check_range("map.vertical_min_tilt_deg", m.vertical_min_tilt_deg, 0.0, 90.0)?;
+        check_range("map.max_vertices", m.max_vertices as f64, 8.0, 4096.0)?;
+        check_range("map.foot_margin_m", m.foot_margin_m, 0.0, 1.0)?;
+        check_range("map.clear_after_frames", m.clear_after_frames as f64, 1.0, 1000.0)?;
+        check_positive("map.clear_tolerance_m", m.clear_tolerance_m)?;
+        check_positive("map.snapshot_period_s", m.snapshot_period_s)?;
         if m.horizontal_max_tilt_deg >= m.vertical_min_tilt_deg {
             return Err((
                 "map.horizontal_max_tilt_deg",

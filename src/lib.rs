@@ -9,6 +9,8 @@ pub mod bench;
 pub mod config;
 pub mod eval;
 pub mod extract;
+pub mod map;
+pub mod replay;
 pub mod sequence;
 pub mod synth;
 pub mod types;

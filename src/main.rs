@@ -9,7 +9,7 @@ use polymap::config::{Backend, Config};
 use polymap::sequence::Sequence;
 use polymap::synth::{self, SceneKind, SynthOptions};
 use polymap::viz;
-use polymap::{eval, extract};
+use polymap::{eval, extract, replay};
 
 #[derive(Parser)]
 #[command(name = "polymap", version, about = "Real-time polygonal terrain mapping for legged robots", long_about = None)]
@@ -86,10 +86,13 @@ enum Command {
         /// Override the config's pipeline.backend
         #[arg(long, value_enum)]
         backend: Option<Backend>,
-        /// Write one picture per frame of how polygons and treads overlap (green: both,
-        /// red: polygon only, blue: tread only)
+        /// Write one picture per frame (with --map: per tread, top-down) of how polygons and
+        /// treads overlap (green: both, red: polygon only, blue: tread only)
         #[arg(long)]
         debug: Option<PathBuf>,
+        /// Score this map (from `polymap replay --out`) against the truth instead of single frames
+        #[arg(long)]
+        map: Option<PathBuf>,
     },
     /// Time extraction per stage over many frames (looping the sequence): median, p99, fps
     Bench {
@@ -105,6 +108,26 @@ enum Command {
         /// Print the numbers as JSON
         #[arg(long)]
         json: bool,
+    },
+    /// Map a whole sequence (extraction + global polygon map) and write the map and its picture
+    Replay {
+        seq: PathBuf,
+        /// Write the map's JSON here
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Write a top-down picture of the map here (with the truth's tread outlines, if known)
+        #[arg(long)]
+        render: Option<PathBuf>,
+        /// Turn the vertical drift filter off (to see what it buys)
+        #[arg(long)]
+        no_drift_filter: bool,
+        /// Settings from this config file (default: the built-in defaults); its [map]
+        /// snapshot settings apply: load at start, save on the period and at the end
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Override the config's pipeline.backend
+        #[arg(long, value_enum)]
+        backend: Option<Backend>,
     },
     /// Check a config file and print it with every default filled in
     Config { file: PathBuf },
@@ -180,9 +203,54 @@ fn run(cli: Cli) -> Result<()> {
                 None => println!("{json}"),
             }
         }
-        Command::Eval { seq, config, json, backend, debug } => {
+        Command::Eval { seq, config, json, backend, debug, map: Some(map) } => {
+            if config.is_some() || backend.is_some() {
+                bail!("--map scores a finished map: --config and --backend do not apply");
+            }
+            evaluate_map(&Sequence::open(&seq)?, &map, json, debug.as_deref())?;
+        }
+        Command::Eval { seq, config, json, backend, debug, map: None } => {
             let config = load_config(config, backend)?;
             evaluate(&Sequence::open(&seq)?, &config, json, debug.as_deref())?;
+        }
+        Command::Replay { seq, out, render, no_drift_filter, config, backend } => {
+            let mut config = load_config(config, backend)?;
+            if no_drift_filter {
+                config.map.drift_filter = false;
+            }
+            let s = Sequence::open(&seq)?;
+            let mut map = replay::initial_map(&config);
+            let bar = progress(s.len() as u64, "replay");
+            replay::replay(&s, &config, &mut map, |_, _| bar.inc(1))?;
+            bar.finish_and_clear();
+            let c = map.counters;
+            println!(
+                "{}: {} frames -> {} map polygons ({} merges, {} cleared, {} rejected); drift {:.1} mm (sd {:.1} mm)",
+                seq.display(),
+                s.len(),
+                map.len(),
+                c.merged,
+                c.cleared,
+                c.rejected,
+                map.drift.z * 1e3,
+                map.drift.var.sqrt() * 1e3
+            );
+            if let Some(st) = map.stair() {
+                println!(
+                    "stair: {} steps, step height {:.1} mm, tread depth {}",
+                    st.steps,
+                    st.step_height * 1e3,
+                    st.tread_depth.map_or("-".into(), |d| format!("{:.1} mm", d * 1e3))
+                );
+            }
+            if let Some(path) = &out {
+                replay::write_json(&mut map, path)?;
+            }
+            if let Some(path) = &render {
+                polymap::map::render::top_down(&map.snapshot(), s.truth.as_ref())
+                    .save(path)
+                    .with_context(|| format!("writing {}", path.display()))?;
+            }
         }
         Command::Bench { seq, backend, frames, config, json } => {
             let config = load_config(config, backend)?;
@@ -281,6 +349,64 @@ fn evaluate(s: &Sequence, config: &Config, json: bool, debug: Option<&Path>) -> 
         m.step_error_mean_mm,
         m.step_error_std_mm,
         m.step_pairs
+    );
+    Ok(())
+}
+
+/// `polymap eval SEQ --map FILE`: the final map against the truth.
+fn evaluate_map(s: &Sequence, path: &Path, json: bool, debug: Option<&Path>) -> Result<()> {
+    if s.truth.is_none() || !s.has_labels {
+        bail!("{} needs truth.json and labels/ to score a map", s.dir.display());
+    }
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let map: polymap::map::MapSnapshot =
+        serde_json::from_str(&text).with_context(|| format!("{} is not a polymap map", path.display()))?;
+    let (scores, pictures) = eval::map::score_map(&map, s, debug.is_some())?;
+    if let Some(dir) = debug {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        for (t, img) in scores.iter().zip(&pictures) {
+            let path = dir.join(format!("step_{:02}.png", t.step));
+            img.save(&path).with_context(|| format!("writing {}", path.display()))?;
+        }
+    }
+    let summary = eval::map::summarise(&scores, &map, s);
+    if json {
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "treads": scores, "summary": summary }))?);
+        return Ok(());
+    }
+    println!("{} against {}: {} map polygons", path.display(), s.dir.display(), map.polygons.len());
+    println!(
+        "{:>5} {:>9} {:>8} {:>7} {:>9} {:>9} {:>10} {:>10} {:>12}",
+        "step", "seen m2", "polygon", "IOU", "over m2", "under m2", "alpha deg", "height m", "height err mm"
+    );
+    for t in &scores {
+        println!(
+            "{:>5} {:>9.4} {:>8} {:>7.3} {:>9.4} {:>9.4} {:>10.3} {:>10.4} {:>12.2}",
+            t.step,
+            t.seen_area_m2,
+            t.polygon.map_or("-".into(), |id| id.to_string()),
+            t.iou,
+            t.over_m2,
+            t.under_m2,
+            t.alpha_deg.unwrap_or(f64::NAN),
+            t.height.unwrap_or(f64::NAN),
+            t.height_error.map_or(f64::NAN, |e| e * 1e3)
+        );
+    }
+    let m = &summary;
+    println!(
+        "treads found {}/{}; IOU mean {:.3} (min {:.3}); alpha mean {:.3} deg, std {:.3} deg; step-height error mean {:.2} mm, std {:.2} mm; height error mean {:.2} mm, max {:.2} mm; drift estimate off by {:.2} mm",
+        m.treads_found,
+        m.treads_seen,
+        m.iou_mean,
+        m.iou_min,
+        m.alpha_mean_deg,
+        m.alpha_std_deg,
+        m.step_error_mean_mm,
+        m.step_error_std_mm,
+        m.height_error_mean_mm,
+        m.height_error_max_mm,
+        m.drift_error_mm
     );
     Ok(())
 }

@@ -63,6 +63,21 @@ pub struct Truth {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stair: Option<StairTruth>,
     pub polygons: Vec<TruthPolygon>,
+    /// Vertical drift injected into poses.txt, m per frame: frame k's true camera height is
+    /// its written one minus k times this.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub pose_drift_per_frame: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+impl Truth {
+    /// Frame k's true pose, from the pose poses.txt gives it.
+    pub fn true_pose(&self, k: usize, written: &nalgebra::Isometry3<f64>) -> nalgebra::Isometry3<f64> {
+        nalgebra::Translation3::new(0.0, 0.0, -self.pose_drift_per_frame * k as f64) * written
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -33,6 +33,7 @@ fn pose(k: usize) -> Pose {
 fn truth() -> Truth {
     Truth {
         stair: Some(StairTruth { kind: "straight".into(), steps: 1, rise: 0.15, going: 0.28, width: 1.0 }),
+        pose_drift_per_frame: 0.0,
         polygons: vec![TruthPolygon {
             label: "tread".into(),
             step: Some(1),

@@ -16,7 +16,7 @@ use rayon::prelude::*;
 pub use noise::NoiseModel;
 pub use scene::{Scene, SceneKind};
 
-use crate::sequence::SequenceWriter;
+use crate::sequence::{SequenceWriter, Truth};
 use crate::types::{Intrinsics, Pose};
 
 /// A noise-free render of a scene from one camera pose.
@@ -164,5 +164,6 @@ pub fn generate(opts: &SynthOptions, out: &Path, mut on_frame: impl FnMut(usize,
         writer.push(&depth, Pose { stamp_ns: stamp_ns(k, opts.fps), transform: written }, Some(&r.labels))?;
         on_frame(k, &r);
     }
-    writer.finish(Some(&scene.truth()))
+    let truth = Truth { pose_drift_per_frame: opts.drift_mm_per_frame / 1000.0, ..scene.truth() };
+    writer.finish(Some(&truth))
 }

@@ -121,6 +121,7 @@ impl Scene {
                     boundary: s.boundary.iter().map(|p| [p.x, p.y, p.z]).collect(),
                 })
                 .collect(),
+            pose_drift_per_frame: 0.0,
         }
     }
 
@@ -284,13 +285,19 @@ pub const BOX_SIZE: [f64; 3] = [0.4, 0.3, 0.25];
 const FLIGHT_X: f64 = 2.0;
 
 pub fn box_scene() -> Scene {
+    box_scene_at(BOX_CENTER)
+}
+
+/// The box scene with the box's centre at `center` (x, y): moving it between frames is how
+/// tests see the map clear what is gone.
+pub fn box_scene_at(center: [f64; 2]) -> Scene {
     let (n, r, g, hw, landing) = (3u32, 0.15, 0.3, 0.5, 1.0);
     let x_end = FLIGHT_X + (n - 1) as f64 * g + landing;
     // One floor under everything: the flight's solid hides the part beneath it.
     let mut s =
         vec![horizontal("floor", None, 0.0, &[[-4.0, -3.0], [x_end + 2.0, -3.0], [x_end + 2.0, 3.0], [-4.0, 3.0]])];
     // Box: top and four sides.
-    let ([cx, cy], [sx, sy, sz]) = (BOX_CENTER, BOX_SIZE);
+    let ([cx, cy], [sx, sy, sz]) = (center, BOX_SIZE);
     let (x0, x1, y0, y1) = (cx - sx / 2.0, cx + sx / 2.0, cy - sy / 2.0, cy + sy / 2.0);
     s.push(horizontal("box_top", None, sz, &[[x0, y0], [x1, y0], [x1, y1], [x0, y1]]));
     for (a, b) in [([x0, y1], [x0, y0]), ([x0, y0], [x1, y0]), ([x1, y0], [x1, y1]), ([x1, y1], [x0, y1])] {

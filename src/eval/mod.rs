@@ -7,6 +7,8 @@
 //! filled, then compared with the label mask of the tread, which is exactly the part of
 //! the truth polygon the camera sees.
 
+pub mod map;
+
 use nalgebra::{Isometry3, Point3};
 use serde::Serialize;
 
@@ -101,7 +103,7 @@ pub fn match_image(polygons: &[Polygon], labels: &[u16], truth: &Truth, intr: &I
 }
 
 /// The stepping surfaces of the truth (treads and the landing) with their label values.
-fn treads(truth: &Truth) -> impl Iterator<Item = (u16, &crate::sequence::TruthPolygon)> {
+pub(crate) fn treads(truth: &Truth) -> impl Iterator<Item = (u16, &crate::sequence::TruthPolygon)> {
     truth
         .polygons
         .iter()

@@ -1,0 +1,750 @@
+//! The global polygon map: each frame's polygons go to the world frame, are lowered by the
+//! estimated vertical drift, and merge into the map polygons they overlap.
+//!
+//! A map polygon keeps its shape as a 2-D `geo` shape in a frame fixed on its plane, so a
+//! merge is a true polygon union (non-convex, holes kept), simplified to a bounded vertex
+//! count. Its plane is the least-squares plane of the area moments of every observation,
+//! re-estimated on each merge. Clearing: a map polygon in view that the depth image
+//! contradicts (the camera sees through it, or something else stands in its place) for
+//! `clear_after_frames` frames in a row is removed.
+
+pub mod convex;
+pub mod drift;
+pub mod geometry;
+pub mod labels;
+pub mod persist;
+pub mod render;
+
+use std::collections::BTreeMap;
+
+use geo::{Area, Centroid, Contains, Coord, MinimumRotatedRect, Point, Polygon as Shape};
+use nalgebra::{Isometry3, Point3, Translation3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::config::MapConfig;
+use crate::extract::{Grid, Polygon};
+use crate::types::Intrinsics;
+use drift::DriftFilter;
+use geometry::{Moments, Plane, PlaneFrame};
+pub use labels::{Label, Stair};
+
+/// One map polygon as planners get it (world frame, metres).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MapPolygon {
+    pub id: u64,
+    pub label: Label,
+    /// Unit normal; up for horizontal polygons.
+    pub normal: [f64; 3],
+    /// Plane offset: normal . p + offset = 0.
+    pub offset: f64,
+    /// m^2, holes excluded.
+    pub area: f64,
+    pub centroid: [f64; 3],
+    pub boundary: Vec<[f64; 3]>,
+    pub holes: Vec<Vec<[f64; 3]>>,
+    /// Convex pieces whose union is the polygon.
+    pub convex_pieces: Vec<Vec<[f64; 3]>>,
+    /// The outline shrunk by the foot margin (empty when nothing is left).
+    pub inset: Vec<[f64; 3]>,
+    /// Frames that saw it.
+    pub observations: u32,
+    /// Step index for treads, landings and risers; 0 for the floor.
+    pub step: Option<u32>,
+}
+
+/// The whole map as saved and published.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MapSnapshot {
+    /// Always "world".
+    pub frame: String,
+    /// Estimated vertical drift of the odometry, m.
+    pub drift_z: f64,
+    /// Its variance, m^2.
+    pub drift_var: f64,
+    #[serde(default)]
+    pub stair: Option<Stair>,
+    pub polygons: Vec<MapPolygon>,
+}
+
+/// What one frame changed.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MapUpdate {
+    pub added: Vec<u64>,
+    pub changed: Vec<u64>,
+    pub removed: Vec<u64>,
+    /// The drift this frame measured (before filtering), m.
+    pub drift_measured: Option<f64>,
+    /// Polygons refused, each with why.
+    pub rejected: Vec<String>,
+}
+
+/// Running totals, for status and logs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct MapCounters {
+    pub frames: u64,
+    pub polygons_in: u64,
+    pub rejected: u64,
+    pub merged: u64,
+    pub added: u64,
+    pub removed: u64,
+    pub cleared: u64,
+}
+
+/// A map polygon's state: its shape on its plane frame and what it has seen.
+#[derive(Clone, Debug)]
+struct Entry {
+    frame: PlaneFrame,
+    shape: Shape<f64>,
+    moments: Moments,
+    plane: Plane,
+    observations: u32,
+    /// Frames in a row that contradicted it.
+    misses: u32,
+    label: Label,
+    step: Option<u32>,
+    /// World axis-aligned box of the outline, for quick rejection.
+    aabb: [[f64; 3]; 2],
+    area: f64,
+    centroid: [f64; 3],
+    /// Points inside the shape that clearing checks against the depth image.
+    samples: Vec<Coord<f64>>,
+    /// The planner's view, built when asked for and dropped when the entry changes.
+    published: Option<MapPolygon>,
+    /// In `frame`: what any frame saw, what two frames saw, and the latest frame's view;
+    /// `shape` is the union of the last two.
+    seen: Option<Shape<f64>>,
+    confirmed: Option<Shape<f64>>,
+    latest: Option<Shape<f64>>,
+}
+
+/// A frame polygon in the world, ready to match.
+struct Observation {
+    boundary: Vec<[f64; 3]>,
+    holes: Vec<Vec<[f64; 3]>>,
+    plane: Plane,
+    moments: Moments,
+    aabb: [[f64; 3]; 2],
+    horizontal: bool,
+    /// How far its outline is pulled in before it joins a map shape, m.
+    erode: f64,
+}
+
+impl Observation {
+    /// Its shape in `frame`, pulled in by its outline's uncertainty (None if nothing is left).
+    fn shape_in(&self, frame: &PlaneFrame) -> Option<Shape<f64>> {
+        let s = frame.shape(&self.boundary, &self.holes);
+        if self.erode <= 0.0 {
+            return Some(s);
+        }
+        use geo::Buffer;
+        geometry::largest(s.buffer(-self.erode))
+    }
+}
+
+/// A map polygon an observation overlaps: its id, the overlap area and the observation's
+/// height over it (along the map polygon's normal) at the overlap's centroid.
+struct Match {
+    id: u64,
+    area: f64,
+    dz: f64,
+}
+
+pub struct PolygonMap {
+    cfg: MapConfig,
+    entries: BTreeMap<u64, Entry>,
+    next_id: u64,
+    pub drift: DriftFilter,
+    stair: Option<Stair>,
+    pub counters: MapCounters,
+}
+
+/// Fewest depth samples of a map polygon in view for clearing to judge it.
+const MIN_CLEAR_SAMPLES: usize = 8;
+/// Samples a polygon gets for clearing (spread on a grid over its shape).
+const CLEAR_SAMPLES: f64 = 48.0;
+/// Something nearer than the surface by more than this is an occluder, not in its place, m.
+const OCCLUDER_M: f64 = 0.3;
+
+impl PolygonMap {
+    pub fn new(cfg: &MapConfig) -> PolygonMap {
+        PolygonMap {
+            cfg: cfg.clone(),
+            entries: BTreeMap::new(),
+            next_id: 1,
+            drift: DriftFilter::new(cfg.drift_sigma_p, cfg.drift_sigma_m),
+            stair: None,
+            counters: MapCounters::default(),
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    pub fn stair(&self) -> Option<&Stair> {
+        self.stair.as_ref()
+    }
+
+    /// The pose with the drift estimate taken out: what the map's frame says the camera is.
+    pub fn corrected(&self, t_world_camera: &Isometry3<f64>) -> Isometry3<f64> {
+        Translation3::new(0.0, 0.0, -self.drift.z) * t_world_camera
+    }
+
+    /// Merges one frame: `polygons` in the camera frame, `t_world_camera` the odometry's pose,
+    /// `depth_m` the frame's depth in metres for clearing (None: nothing is cleared).
+    pub fn update(
+        &mut self,
+        polygons: &[Polygon],
+        t_world_camera: &Isometry3<f64>,
+        intrinsics: &Intrinsics,
+        depth_m: Option<&Grid<f32>>,
+    ) -> MapUpdate {
+        let mut update = MapUpdate::default();
+        self.counters.frames += 1;
+        self.counters.polygons_in += polygons.len() as u64;
+        let valid: Vec<&Polygon> = polygons
+            .iter()
+            .filter(|p| match polygon_problem(p) {
+                Some(why) => {
+                    update.rejected.push(format!("polygon {}: {why}", p.id));
+                    false
+                }
+                None => true,
+            })
+            .collect();
+        if !t_world_camera.translation.vector.iter().chain(t_world_camera.rotation.coords.iter()).all(|v| v.is_finite())
+        {
+            update.rejected.push("pose is not finite: frame skipped".into());
+        }
+        self.counters.rejected += update.rejected.len() as u64;
+        if update.rejected.iter().any(|r| r.starts_with("pose")) {
+            return update;
+        }
+
+        // Drift: predict, measure on the horizontal matches, correct.
+        if self.cfg.drift_filter {
+            self.drift.predict();
+            let obs = self.observations(&valid, t_world_camera, intrinsics);
+            let (mut weight, mut sum) = (0.0, 0.0);
+            for o in obs.iter().filter(|o| o.horizontal) {
+                for m in self.matches(o) {
+                    if self.entries[&m.id].label.is_horizontal() {
+                        weight += m.area;
+                        sum += m.area * m.dz * self.entries[&m.id].frame.normal.z;
+                    }
+                }
+            }
+            if weight > 0.0 {
+                let measured = self.drift.z + sum / weight;
+                self.drift.correct(measured);
+                update.drift_measured = Some(measured);
+                tracing::debug!(
+                    "drift measured {:.1} mm over {weight:.3} m^2 -> estimate {:.1} mm",
+                    measured * 1e3,
+                    self.drift.z * 1e3
+                );
+            }
+        }
+
+        // Merge, against the map as it grows within the frame.
+        let mut touched = Vec::new();
+        for o in self.observations(&valid, t_world_camera, intrinsics) {
+            let mut matches = self.matches(&o);
+            matches.sort_by(|a, b| b.area.total_cmp(&a.area));
+            let id = match matches.first() {
+                None => {
+                    let id = self.insert(&o);
+                    update.added.push(id);
+                    id
+                }
+                Some(best) => {
+                    let id = best.id;
+                    for other in &matches[1..] {
+                        self.absorb(id, other.id);
+                        update.removed.push(other.id);
+                    }
+                    self.merge(id, &o);
+                    update.changed.push(id);
+                    id
+                }
+            };
+            touched.push(id);
+        }
+        self.counters.added += update.added.len() as u64;
+        self.counters.merged += update.changed.len() as u64;
+
+        if let Some(depth_m) = depth_m {
+            let camera = self.corrected(t_world_camera);
+            let cleared: Vec<u64> = self
+                .entries
+                .iter_mut()
+                .filter(|(id, _)| !touched.contains(id))
+                .filter_map(|(&id, e)| match contradiction(e, &camera, depth_m, intrinsics, &self.cfg) {
+                    Some(true) => {
+                        e.misses += 1;
+                        (e.misses >= self.cfg.clear_after_frames).then_some(id)
+                    }
+                    Some(false) => {
+                        e.misses = 0;
+                        None
+                    }
+                    None => None,
+                })
+                .collect();
+            for id in cleared {
+                self.entries.remove(&id);
+                update.removed.push(id);
+                self.counters.cleared += 1;
+            }
+        }
+        for id in &touched {
+            if let Some(e) = self.entries.get_mut(id) {
+                e.misses = 0;
+            }
+        }
+        update.removed.sort_unstable();
+        update.removed.dedup();
+        update.added.retain(|id| self.entries.contains_key(id));
+        update.changed.retain(|id| self.entries.contains_key(id) && !update.added.contains(id));
+        update.changed.sort_unstable();
+        update.changed.dedup();
+        self.counters.removed += update.removed.len() as u64;
+
+        for id in self.relabel() {
+            if !update.added.contains(&id) && !update.changed.contains(&id) {
+                update.changed.push(id);
+            }
+        }
+        update
+    }
+
+    /// The frame's polygons in the world, drift taken out.
+    fn observations(
+        &self,
+        polygons: &[&Polygon],
+        t_world_camera: &Isometry3<f64>,
+        intrinsics: &Intrinsics,
+    ) -> Vec<Observation> {
+        let t = self.corrected(t_world_camera);
+        let cos_h = self.cfg.horizontal_max_tilt_deg.to_radians().cos();
+        polygons
+            .iter()
+            .map(|p| {
+                let erode = (OUTLINE_UNCERTAINTY_PX * footprint(p, intrinsics)).min(MAX_ERODE_M);
+                let w = p.transformed(&t);
+                let mut normal = Vector3::from(w.normal);
+                let mut offset = w.offset;
+                let horizontal = normal.z.abs() >= cos_h;
+                if horizontal && normal.z < 0.0 {
+                    normal = -normal;
+                    offset = -offset;
+                }
+                let moments = Moments::of_polygon(&w.boundary, &w.holes, &normal);
+                Observation {
+                    aabb: aabb(&w.boundary),
+                    plane: Plane { normal, offset },
+                    moments,
+                    horizontal,
+                    erode,
+                    boundary: w.boundary,
+                    holes: w.holes,
+                }
+            })
+            .collect()
+    }
+
+    /// Map polygons that `o` overlaps enough, with normals and heights that agree.
+    fn matches(&self, o: &Observation) -> Vec<Match> {
+        let cos_n = self.cfg.merge_normal_tolerance_deg.to_radians().cos();
+        let tol = self.cfg.merge_height_tolerance_m;
+        let mut out = Vec::new();
+        for (&id, e) in &self.entries {
+            if !aabb_overlap(&o.aabb, &e.aabb, tol) || o.plane.normal.dot(&e.plane.normal).abs() < cos_n {
+                continue;
+            }
+            let shape = e.frame.shape(&o.boundary, &o.holes);
+            let (area, centre) = geometry::overlap(&shape, &e.shape);
+            let Some(c) = centre else { continue };
+            if area < self.cfg.merge_min_overlap * shape.unsigned_area().min(e.area) {
+                continue;
+            }
+            let q = e.frame.origin + e.frame.e1 * c.x + e.frame.e2 * c.y;
+            let (Some(t_obs), Some(t_map)) = (o.plane.along(&q, &e.frame.normal), e.plane.along(&q, &e.frame.normal))
+            else {
+                continue;
+            };
+            let dz = t_obs - t_map;
+            if dz.abs() <= tol {
+                out.push(Match { id, area, dz });
+            }
+        }
+        out
+    }
+
+    fn insert(&mut self, o: &Observation) -> u64 {
+        let id = self.next_id;
+        self.next_id += 1;
+        let centre = o.moments.sum / o.moments.weight.max(1e-12);
+        let frame = PlaneFrame::new(centre, o.plane.normal);
+        let shape = o.shape_in(&frame).unwrap_or_else(|| frame.shape(&o.boundary, &o.holes));
+        let shape = geometry::simplify_to(&shape, self.cfg.max_vertices);
+        let mut e = Entry {
+            frame,
+            shape,
+            moments: o.moments,
+            plane: o.plane,
+            observations: 1,
+            misses: 0,
+            label: Label::Slope,
+            step: None,
+            aabb: o.aabb,
+            area: 0.0,
+            centroid: [0.0; 3],
+            samples: Vec::new(),
+            published: None,
+            seen: o.shape_in(&frame),
+            confirmed: None,
+            latest: o.shape_in(&frame),
+        };
+        refresh(&mut e);
+        self.entries.insert(id, e);
+        id
+    }
+
+    /// Unions observation `o` into entry `id` and refits its plane.
+    fn merge(&mut self, id: u64, o: &Observation) {
+        let max_vertices = self.cfg.max_vertices;
+        let e = self.entries.get_mut(&id).expect("matched entries exist");
+        if let Some(view) = o.shape_in(&e.frame) {
+            // What two frames saw is confirmed and stays; what only one frame saw shows while
+            // it is the latest view. So one frame's stray overshoot (a leak, a mixed-pixel
+            // fringe) never becomes a lasting part of the map.
+            if let Some(twice) = e.seen.as_ref().and_then(|s| geometry::intersection(s, &view)) {
+                e.confirmed = union_into(e.confirmed.take(), twice, max_vertices);
+            }
+            e.seen = union_into(e.seen.take(), view.clone(), max_vertices);
+            e.latest = Some(view);
+            e.shape = shown(e.confirmed.as_ref(), e.latest.as_ref(), max_vertices).unwrap_or(e.shape.clone());
+        }
+        e.moments.add(&o.moments);
+        e.observations += 1;
+        if let Some(p) = e.moments.plane(&e.plane.normal) {
+            e.plane = p;
+        }
+        refresh(e);
+    }
+
+    /// Entry `other` merged into `id` (one observation bridged them), then dropped.
+    fn absorb(&mut self, id: u64, other: u64) {
+        let Some(o) = self.entries.remove(&other) else { return };
+        let max_vertices = self.cfg.max_vertices;
+        let e = self.entries.get_mut(&id).expect("matched entries exist");
+        let boundary = o.frame.lift_ring(o.shape.exterior(), &o.plane);
+        let holes: Vec<_> = o.shape.interiors().iter().map(|r| o.frame.lift_ring(r, &o.plane)).collect();
+        let theirs = e.frame.shape(&boundary, &holes);
+        e.seen = union_into(e.seen.take(), theirs.clone(), max_vertices);
+        e.confirmed = union_into(e.confirmed.take(), theirs, max_vertices);
+        e.shape = shown(e.confirmed.as_ref(), e.latest.as_ref(), max_vertices).unwrap_or(e.shape.clone());
+        e.moments.add(&o.moments);
+        e.observations += o.observations;
+        if let Some(p) = e.moments.plane(&e.plane.normal) {
+            e.plane = p;
+        }
+        refresh(e);
+    }
+
+    /// Labels every entry; returns the ids whose label or step changed.
+    fn relabel(&mut self) -> Vec<u64> {
+        let facts: Vec<labels::Facts> = self
+            .entries
+            .values()
+            .map(|e| labels::Facts {
+                tilt_deg: e.plane.normal.z.abs().clamp(0.0, 1.0).acos().to_degrees(),
+                height: e.centroid[2],
+                z_range: [e.aabb[0][2], e.aabb[1][2]],
+                depth: e.shape.minimum_rotated_rect().map_or(0.0, |r| min_side(&r)),
+                xy: [e.centroid[0], e.centroid[1]],
+            })
+            .collect();
+        let (out, stair) = labels::label(&facts, self.cfg.horizontal_max_tilt_deg, self.cfg.vertical_min_tilt_deg);
+        self.stair = stair;
+        let mut changed = Vec::new();
+        for ((&id, e), (label, step)) in self.entries.iter_mut().zip(out) {
+            if e.label != label || e.step != step {
+                e.label = label;
+                e.step = step;
+                e.published = None;
+                changed.push(id);
+            }
+        }
+        changed
+    }
+
+    /// One map polygon as planners see it (built on first request after a change).
+    pub fn polygon(&mut self, id: u64) -> Option<MapPolygon> {
+        let margin = self.cfg.foot_margin_m;
+        let e = self.entries.get_mut(&id)?;
+        if e.published.is_none() {
+            e.published = Some(publish(id, e, margin));
+        }
+        e.published.clone()
+    }
+
+    pub fn ids(&self) -> Vec<u64> {
+        self.entries.keys().copied().collect()
+    }
+
+    /// The whole map.
+    pub fn snapshot(&mut self) -> MapSnapshot {
+        let polygons = self.ids().into_iter().filter_map(|id| self.polygon(id)).collect();
+        MapSnapshot {
+            frame: "world".into(),
+            drift_z: self.drift.z,
+            drift_var: self.drift.var,
+            stair: self.stair.clone(),
+            polygons,
+        }
+    }
+
+    /// A map rebuilt from a snapshot: each polygon's moments are its surface's, weighted by
+    /// its observations, so later frames refine it as if it had been seen all along.
+    pub fn from_snapshot(cfg: &MapConfig, s: &MapSnapshot) -> Result<PolygonMap, String> {
+        if s.frame != "world" {
+            return Err(format!("frame is {:?}, a map is in \"world\"", s.frame));
+        }
+        if !(s.drift_z.is_finite() && s.drift_var.is_finite() && s.drift_var >= 0.0) {
+            return Err(format!("drift_z {} / drift_var {} must be finite, the variance >= 0", s.drift_z, s.drift_var));
+        }
+        let mut map = PolygonMap::new(cfg);
+        map.drift.z = s.drift_z;
+        map.drift.var = s.drift_var;
+        let mut ids: Vec<u64> = s.polygons.iter().map(|p| p.id).collect();
+        ids.sort_unstable();
+        if let Some(w) = ids.windows(2).find(|w| w[0] == w[1]) {
+            return Err(format!("polygon id {} appears twice", w[0]));
+        }
+        for p in &s.polygons {
+            let normal = Vector3::from(p.normal);
+            let as_frame_polygon = Polygon {
+                id: p.id as u32,
+                normal: p.normal,
+                offset: p.offset,
+                area: p.area,
+                boundary: p.boundary.clone(),
+                holes: p.holes.clone(),
+                pixel_count: 0,
+                inlier_ratio: 1.0,
+                rms: 0.0,
+            };
+            if let Some(why) = polygon_problem(&as_frame_polygon) {
+                return Err(format!("polygon {}: {why}", p.id));
+            }
+            let moments = Moments::of_polygon(&p.boundary, &p.holes, &normal).scaled(p.observations.max(1) as f64);
+            let o = Observation {
+                aabb: aabb(&p.boundary),
+                plane: Plane { normal, offset: p.offset },
+                moments,
+                horizontal: false,
+                erode: 0.0,
+                boundary: p.boundary.clone(),
+                holes: p.holes.clone(),
+            };
+            map.next_id = p.id;
+            map.insert(&o);
+            let e = map.entries.get_mut(&p.id).expect("just inserted");
+            e.observations = p.observations.max(1);
+            e.confirmed = Some(e.shape.clone());
+            e.seen = Some(e.shape.clone());
+            map.next_id = map.next_id.max(p.id + 1);
+        }
+        map.next_id = s.polygons.iter().map(|p| p.id + 1).max().unwrap_or(1).max(map.next_id);
+        map.relabel();
+        Ok(map)
+    }
+}
+
+/// `acc` grown by `more` (`more` alone when `acc` is empty), simplified.
+fn union_into(acc: Option<Shape<f64>>, more: Shape<f64>, max_vertices: usize) -> Option<Shape<f64>> {
+    let u = match acc {
+        Some(a) => geometry::union(&a, &more).unwrap_or(a),
+        None => more,
+    };
+    Some(geometry::simplify_to(&u, max_vertices))
+}
+
+/// The shape a map polygon shows: its confirmed part and the latest frame's view.
+fn shown(confirmed: Option<&Shape<f64>>, latest: Option<&Shape<f64>>, max_vertices: usize) -> Option<Shape<f64>> {
+    let s = match (confirmed, latest) {
+        (Some(c), Some(l)) => geometry::union(c, l)?,
+        (Some(s), None) | (None, Some(s)) => s.clone(),
+        (None, None) => return None,
+    };
+    Some(geometry::simplify_to(&s, max_vertices))
+}
+
+/// A frame's outline is uncertain by about this many pixel footprints: its edge pixels are
+/// mixed, closed over, or belong to the neighbouring surface within the inlier distance, and
+/// ray-cast at a grazing angle each lands a whole footprint away. A union keeps every
+/// frame's overshoot, so each outline is pulled in by this much before it joins; the
+/// nearest views, whose footprints are smallest, then set the map's edges.
+const OUTLINE_UNCERTAINTY_PX: f64 = 1.5;
+/// The most an outline is pulled in, m.
+const MAX_ERODE_M: f64 = 0.05;
+
+/// Median size of one pixel on the polygon's plane at its outline's vertices, m: range
+/// over focal length, stretched by the obliquity of the view.
+fn footprint(p: &Polygon, intrinsics: &Intrinsics) -> f64 {
+    let n = Vector3::from(p.normal);
+    let mut sizes: Vec<f64> = p
+        .boundary
+        .iter()
+        .map(|v| {
+            let v = Vector3::from(*v);
+            v.norm_squared() / (intrinsics.fx * n.dot(&v).abs().max(1e-6))
+        })
+        .collect();
+    sizes.sort_by(f64::total_cmp);
+    sizes.get(sizes.len() / 2).copied().unwrap_or(0.0)
+}
+
+/// Why a frame polygon cannot go into the map, if it cannot.
+pub fn polygon_problem(p: &Polygon) -> Option<String> {
+    let n = Vector3::from(p.normal);
+    if !n.iter().all(|v| v.is_finite()) || (n.norm() - 1.0).abs() > 1e-3 {
+        return Some(format!("normal {:?} is not a unit vector", p.normal));
+    }
+    if !p.offset.is_finite() {
+        return Some(format!("offset {} is not finite", p.offset));
+    }
+    if p.boundary.len() < 3 {
+        return Some(format!("outline has {} vertices, at least 3 needed", p.boundary.len()));
+    }
+    let all = p.boundary.iter().chain(p.holes.iter().flatten());
+    if all.clone().any(|v| !v.iter().all(|c| c.is_finite() && c.abs() < 1e6)) {
+        return Some("a vertex is not finite (or beyond 1000 km)".into());
+    }
+    if p.holes.iter().any(|h| h.len() < 3) {
+        return Some("a hole has under 3 vertices".into());
+    }
+    None
+}
+
+/// Area, centroid, world box and clearing samples of an entry after its shape or plane changed.
+fn refresh(e: &mut Entry) {
+    e.published = None;
+    e.area = e.shape.unsigned_area();
+    let c = e.shape.centroid().map_or(Coord { x: 0.0, y: 0.0 }, |p| p.0);
+    e.centroid = e.frame.lift(c, &e.plane);
+    e.aabb = aabb(&e.frame.lift_ring(e.shape.exterior(), &e.plane));
+    e.samples.clear();
+    if let Some(r) = geo::BoundingRect::bounding_rect(&e.shape) {
+        let step = (e.area / CLEAR_SAMPLES).sqrt().max(0.01);
+        let mut y = r.min().y + step / 2.0;
+        while y < r.max().y {
+            let mut x = r.min().x + step / 2.0;
+            while x < r.max().x {
+                let c = Coord { x, y };
+                if e.shape.contains(&Point(c)) {
+                    e.samples.push(c);
+                }
+                x += step;
+            }
+            y += step;
+        }
+    }
+}
+
+/// Whether the depth image contradicts entry `e` (None: too little of it in view to say).
+fn contradiction(
+    e: &Entry,
+    t_world_camera: &Isometry3<f64>,
+    depth_m: &Grid<f32>,
+    intrinsics: &Intrinsics,
+    cfg: &MapConfig,
+) -> Option<bool> {
+    let camera_world = t_world_camera.inverse();
+    let (w, h) = (depth_m.width, depth_m.height);
+    let (mut support, mut against) = (0usize, 0usize);
+    for c in &e.samples {
+        let p = camera_world * Point3::from(e.frame.lift(*c, &e.plane));
+        if p.z < 0.1 {
+            continue;
+        }
+        let (u, v) = intrinsics.project(&p);
+        let (u, v) = (u.round(), v.round());
+        if u < 0.0 || v < 0.0 || u >= w as f64 || v >= h as f64 {
+            continue;
+        }
+        let measured = depth_m.data[v as usize * w + u as usize] as f64;
+        if measured <= 0.0 {
+            continue;
+        }
+        let tol = cfg.clear_tolerance_m + 0.01 * p.z;
+        if (measured - p.z).abs() <= tol {
+            support += 1;
+        } else if measured > p.z - OCCLUDER_M {
+            // Seen through (farther), or something else standing where it was (a little nearer).
+            against += 1;
+        }
+    }
+    (support + against >= MIN_CLEAR_SAMPLES).then_some(against * 2 > support + against)
+}
+
+/// The planner's view of an entry.
+fn publish(id: u64, e: &Entry, foot_margin: f64) -> MapPolygon {
+    let lift_ring = |r: &geo::LineString<f64>| e.frame.lift_ring(r, &e.plane);
+    let convex_pieces = convex::convex_pieces(&e.shape)
+        .into_iter()
+        .map(|ring| ring.into_iter().map(|c| e.frame.lift(c, &e.plane)).collect())
+        .collect();
+    let inset = if foot_margin > 0.0 {
+        use geo::Buffer;
+        geometry::largest(e.shape.buffer(-foot_margin)).map_or(Vec::new(), |s| lift_ring(s.exterior()))
+    } else {
+        lift_ring(e.shape.exterior())
+    };
+    let n = e.plane.normal;
+    MapPolygon {
+        id,
+        label: e.label,
+        normal: [n.x, n.y, n.z],
+        offset: e.plane.offset,
+        // The shape lies on the frame's plane; tilting onto the fitted plane stretches it.
+        area: e.area / n.dot(&e.frame.normal).abs().max(1e-6),
+        centroid: e.centroid,
+        boundary: lift_ring(e.shape.exterior()),
+        holes: e.shape.interiors().iter().map(lift_ring).collect(),
+        convex_pieces,
+        inset,
+        observations: e.observations,
+        step: e.step,
+    }
+}
+
+fn aabb(points: &[[f64; 3]]) -> [[f64; 3]; 2] {
+    let mut b = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+    for p in points {
+        for k in 0..3 {
+            b[0][k] = b[0][k].min(p[k]);
+            b[1][k] = b[1][k].max(p[k]);
+        }
+    }
+    b
+}
+
+fn aabb_overlap(a: &[[f64; 3]; 2], b: &[[f64; 3]; 2], margin: f64) -> bool {
+    (0..3).all(|k| a[0][k] <= b[1][k] + margin && b[0][k] <= a[1][k] + margin)
+}
+
+fn min_side(r: &Shape<f64>) -> f64 {
+    let c = &r.exterior().0;
+    if c.len() < 3 {
+        return 0.0;
+    }
+    let d = |a: Coord<f64>, b: Coord<f64>| (a.x - b.x).hypot(a.y - b.y);
+    d(c[0], c[1]).min(d(c[1], c[2]))
+}
