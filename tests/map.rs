@@ -1,0 +1,325 @@
+//! The global map on hand-made polygons: merging keeps true shapes, the drift filter, labels,
+//! convex pieces and insets, snapshots, and bad input.
+
+use geo::{Area, BooleanOps, Coord, LineString, Polygon as Shape};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use polymap::config::MapConfig;
+use polymap::extract::Polygon;
+use polymap::map::convex::convex_pieces;
+use polymap::map::drift::DriftFilter;
+use polymap::map::{Label, MapSnapshot, PolygonMap, persist};
+use polymap::types::Intrinsics;
+use proptest::prelude::*;
+
+/// A camera 2 m up and 2 m back looking 45 deg down along +x; so sharp (huge focal length)
+/// that outlines are pulled in by micrometres only.
+fn camera() -> (Isometry3<f64>, Intrinsics) {
+    let pose = polymap::synth::path::camera_pose(Point3::new(-2.0, 0.0, 2.0), 0.0, 45f64.to_radians(), 0.0);
+    let intr = Intrinsics { width: 640, height: 480, fx: 1e6, fy: 1e6, cx: 320.0, cy: 240.0, depth_scale: 0.00025 };
+    (pose, intr)
+}
+
+/// A horizontal polygon at height `z` with outline `xy` (world), as the camera sees it.
+fn seen(xy: &[[f64; 2]], z: f64, pose: &Isometry3<f64>) -> Polygon {
+    let world = Polygon {
+        id: 0,
+        normal: [0.0, 0.0, 1.0],
+        offset: -z,
+        area: 0.0,
+        boundary: xy.iter().map(|&[x, y]| [x, y, z]).collect(),
+        holes: vec![],
+        pixel_count: 1000,
+        inlier_ratio: 1.0,
+        rms: 0.001,
+    };
+    world.transformed(&pose.inverse())
+}
+
+fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<[f64; 2]> {
+    vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+}
+
+#[test]
+fn overlapping_views_merge_into_their_true_non_convex_union() {
+    let (pose, intr) = camera();
+    let mut map = PolygonMap::new(&MapConfig::default());
+    // An L seen as its two arms, each twice (a shape joins for good once two frames saw it).
+    let arm_x = rect(0.0, 0.0, 1.0, 0.3);
+    let arm_y = rect(0.0, 0.0, 0.3, 1.0);
+    for arm in [&arm_x, &arm_y, &arm_x, &arm_y] {
+        map.update(&[seen(arm, 0.0, &pose)], &pose, &intr, None);
+    }
+    let snap = map.snapshot();
+    assert_eq!(snap.polygons.len(), 1, "the arms overlap: one polygon");
+    let p = &snap.polygons[0];
+    let l_area = 0.3 + 0.3 - 0.09;
+    assert!((p.area - l_area).abs() < 1e-4, "area {} is the L's {l_area}, not its hull's", p.area);
+    assert_eq!(p.observations, 4);
+    assert!(p.convex_pieces.len() >= 2, "an L needs at least two convex pieces");
+    let pieces: f64 = p.convex_pieces.iter().map(|r| ring_area(r)).sum();
+    assert!((pieces - p.area).abs() < 1e-9, "convex pieces cover {pieces} m^2");
+    // The inset lies 5 cm inside: arms [0.05, 0.95] x [0.05, 0.25] and their mirror.
+    let inset = ring_area(&p.inset);
+    let want = 2.0 * 0.9 * 0.2 - 0.2 * 0.2;
+    assert!((inset - want).abs() < 2e-3, "inset area {inset}, expected about {want}");
+}
+
+#[test]
+fn a_view_seen_once_shows_only_while_it_is_the_latest() {
+    let (pose, intr) = camera();
+    let mut map = PolygonMap::new(&MapConfig::default());
+    let tread = rect(0.0, 0.0, 0.28, 1.0);
+    map.update(&[seen(&tread, 0.15, &pose)], &pose, &intr, None);
+    // One frame's leak 10 cm past the back edge, then the tread again.
+    map.update(&[seen(&rect(0.0, 0.0, 0.38, 1.0), 0.15, &pose)], &pose, &intr, None);
+    assert!((map.snapshot().polygons[0].area - 0.38).abs() < 1e-4, "the latest view shows");
+    map.update(&[seen(&tread, 0.15, &pose)], &pose, &intr, None);
+    let area = map.snapshot().polygons[0].area;
+    assert!((area - 0.28).abs() < 1e-4, "the leak seen once is gone: area {area}");
+}
+
+#[test]
+fn polygons_at_different_heights_or_tilts_stay_apart() {
+    let (pose, intr) = camera();
+    let mut map = PolygonMap::new(&MapConfig::default());
+    let r = rect(0.0, 0.0, 1.0, 1.0);
+    // 15 cm apart (two treads), beyond the 5 cm drift tolerance.
+    map.update(&[seen(&r, 0.0, &pose), seen(&r, 0.15, &pose)], &pose, &intr, None);
+    assert_eq!(map.len(), 2);
+    // 3 cm apart: the same surface.
+    map.update(&[seen(&r, 0.03, &pose)], &pose, &intr, None);
+    assert_eq!(map.len(), 2);
+    // Tilted 30 deg, beyond the 10 deg normal tolerance.
+    let mut tilted = seen(&r, 0.0, &pose);
+    let n = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 30f64.to_radians()) * Vector3::from(tilted.normal);
+    tilted.normal = [n.x, n.y, n.z];
+    map.update(&[tilted], &pose, &intr, None);
+    assert_eq!(map.len(), 3);
+}
+
+#[test]
+fn plane_is_refit_from_all_observations() {
+    let (pose, intr) = camera();
+    let mut map = PolygonMap::new(&MapConfig { drift_filter: false, ..MapConfig::default() });
+    let r = rect(0.0, 0.0, 1.0, 1.0);
+    for z in [0.10, 0.12, 0.14] {
+        map.update(&[seen(&r, z, &pose)], &pose, &intr, None);
+    }
+    let p = &map.snapshot().polygons[0];
+    assert!((p.offset + 0.12).abs() < 1e-9, "plane height {} is the mean 0.12", -p.offset);
+    assert!((p.normal[2] - 1.0).abs() < 1e-12);
+}
+
+#[test]
+fn drift_filter_follows_the_papers_equations() {
+    let mut f = DriftFilter::new(4e-6, 1e-6);
+    f.predict();
+    assert_eq!(f.var, 4e-6);
+    f.correct(0.01);
+    let k = 4e-6 / (4e-6 + 1e-6);
+    assert!((f.z - k * 0.01).abs() < 1e-15);
+    assert!((f.var - (1.0 - k) * 4e-6).abs() < 1e-18);
+    for _ in 0..50 {
+        f.predict();
+        f.correct(0.02);
+    }
+    assert!((f.z - 0.02).abs() < 1e-9, "a constant drift is found: {}", f.z);
+}
+
+#[test]
+fn drift_is_measured_on_matched_horizontals_and_taken_out() {
+    let (pose, intr) = camera();
+    let mut map = PolygonMap::new(&MapConfig::default());
+    let floor = rect(-1.0, -1.0, 1.0, 1.0);
+    let tread = rect(1.0, -0.5, 1.28, 0.5);
+    map.update(&[seen(&floor, 0.0, &pose), seen(&tread, 0.15, &pose)], &pose, &intr, None);
+    // The odometry drifts up 1 mm a frame: everything seems to sink.
+    for k in 1..=60 {
+        let drifted = Translation3::new(0.0, 0.0, 0.001 * k as f64) * pose;
+        let polys = [seen(&floor, 0.0, &pose), seen(&tread, 0.15, &pose)];
+        map.update(&polys, &drifted, &intr, None);
+    }
+    assert!((map.drift.z - 0.060).abs() < 0.002, "drift estimate {} after 60 mm", map.drift.z);
+    let snap = map.snapshot();
+    assert_eq!(snap.polygons.len(), 2);
+    let heights: Vec<f64> = snap.polygons.iter().map(|p| p.centroid[2]).collect();
+    assert!(heights.iter().any(|h| h.abs() < 0.002) && heights.iter().any(|h| (h - 0.15).abs() < 0.002), "{heights:?}");
+}
+
+#[test]
+fn labels_name_a_staircase() {
+    let (pose, intr) = camera();
+    let mut map = PolygonMap::new(&MapConfig::default());
+    let mut polys = vec![seen(&rect(-2.0, -1.0, 0.0, 1.0), 0.0, &pose)];
+    for k in 1..=4 {
+        let x = (k - 1) as f64 * 0.28;
+        polys.push(seen(&rect(x, -0.5, x + 0.28, 0.5), 0.15 * k as f64, &pose));
+    }
+    polys.push(seen(&rect(1.12, -0.5, 2.12, 0.5), 0.75, &pose));
+    // A riser: vertical, 15 cm tall, its top at tread 1.
+    let riser = Polygon {
+        id: 9,
+        normal: [-1.0, 0.0, 0.0],
+        offset: 0.0,
+        area: 0.15,
+        boundary: vec![[0.0, 0.5, 0.0], [0.0, -0.5, 0.0], [0.0, -0.5, 0.15], [0.0, 0.5, 0.15]],
+        holes: vec![],
+        pixel_count: 500,
+        inlier_ratio: 1.0,
+        rms: 0.001,
+    };
+    polys.push(riser.transformed(&pose.inverse()));
+    map.update(&polys, &pose, &intr, None);
+    let snap = map.snapshot();
+    let label_at = |z: f64| {
+        let p = snap.polygons.iter().find(|p| p.label.is_horizontal() && (p.centroid[2] - z).abs() < 0.01).unwrap();
+        (p.label, p.step)
+    };
+    assert_eq!(label_at(0.0), (Label::Floor, Some(0)));
+    assert_eq!(label_at(0.30), (Label::Tread, Some(2)));
+    assert_eq!(label_at(0.75), (Label::Landing, Some(5)));
+    let r = snap.polygons.iter().find(|p| p.normal[2].abs() < 0.1).unwrap();
+    assert_eq!((r.label, r.step), (Label::Riser, Some(1)));
+    let stair = snap.stair.as_ref().expect("a stair");
+    assert_eq!(stair.steps, 5);
+    assert!((stair.step_height - 0.15).abs() < 1e-6);
+    assert!((stair.tread_depth.unwrap() - 0.28).abs() < 1e-6);
+}
+
+#[test]
+fn bad_polygons_and_poses_are_refused_and_counted() {
+    let (pose, intr) = camera();
+    let mut map = PolygonMap::new(&MapConfig::default());
+    let good = seen(&rect(0.0, 0.0, 1.0, 1.0), 0.0, &pose);
+    let mut nan = good.clone();
+    nan.boundary[1][0] = f64::NAN;
+    let mut not_unit = good.clone();
+    not_unit.normal = [0.0, 0.0, 2.0];
+    let mut two = good.clone();
+    two.boundary.truncate(2);
+    let update = map.update(&[nan, not_unit, two, good.clone()], &pose, &intr, None);
+    assert_eq!(update.rejected.len(), 3, "{:?}", update.rejected);
+    assert!(update.rejected[0].contains("not finite"), "{}", update.rejected[0]);
+    assert!(update.rejected[1].contains("unit"), "{}", update.rejected[1]);
+    assert!(update.rejected[2].contains("3"), "{}", update.rejected[2]);
+    assert_eq!(map.len(), 1);
+    let mut bad_pose = pose;
+    bad_pose.translation.x = f64::INFINITY;
+    let before = map.snapshot();
+    let update = map.update(&[good], &bad_pose, &intr, None);
+    assert!(update.rejected.iter().any(|r| r.contains("pose")));
+    assert_eq!(map.snapshot(), before, "a bad pose leaves the map as it was");
+    assert_eq!(map.counters.rejected, 4);
+}
+
+#[test]
+fn snapshots_round_trip_and_corrupt_files_are_moved_aside() {
+    let (pose, intr) = camera();
+    let cfg = MapConfig::default();
+    let mut map = PolygonMap::new(&cfg);
+    for _ in 0..2 {
+        map.update(&[seen(&rect(0.0, 0.0, 1.0, 0.5), 0.0, &pose)], &pose, &intr, None);
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("map.json");
+    let snap = map.snapshot();
+    persist::save(&snap, &path).unwrap();
+    let loaded = persist::load(&path, |s| PolygonMap::from_snapshot(&cfg, s).map(|_| ())).unwrap();
+    assert_eq!(loaded, snap);
+    let mut reloaded = PolygonMap::from_snapshot(&cfg, &loaded).unwrap();
+    let again = reloaded.snapshot();
+    assert_eq!(again.polygons.len(), 1);
+    assert!((again.polygons[0].area - snap.polygons[0].area).abs() < 1e-9);
+    assert_eq!(again.polygons[0].observations, 2);
+
+    std::fs::write(&path, b"{\"frame\": \"world\", \"drift_z\": ").unwrap();
+    let err = persist::load(&path, |_| Ok(())).unwrap_err().to_string();
+    assert!(err.contains("corrupt") && err.contains("map.json"), "{err}");
+    assert!(!path.exists(), "the corrupt file was moved, not left to be overwritten");
+    let aside: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(aside.iter().any(|n| n.to_string_lossy().starts_with("map.json.corrupt-")), "{aside:?}");
+
+    let mut bad: MapSnapshot = snap.clone();
+    bad.polygons[0].normal = [0.0, 0.0, 0.0];
+    assert!(PolygonMap::from_snapshot(&cfg, &bad).err().expect("a zero normal is refused").contains("normal"));
+}
+
+fn ring_area(r: &[[f64; 3]]) -> f64 {
+    let mut a = 0.0;
+    for i in 0..r.len() {
+        let (p, q) = (r[i], r[(i + 1) % r.len()]);
+        a += p[0] * q[1] - q[0] * p[1];
+    }
+    (a / 2.0).abs()
+}
+
+/// A random simple polygon: star-shaped around the origin (sorted angles, radii 0.3..1).
+fn star(n: usize) -> impl Strategy<Value = Shape<f64>> {
+    (prop::collection::vec(0.0..1.0f64, n), prop::collection::vec(0.3..1.0f64, n)).prop_map(|(gaps, radii)| {
+        let total: f64 = gaps.iter().map(|g| g + 0.2).sum();
+        let mut angle = 0.0;
+        let pts: Vec<Coord<f64>> = gaps
+            .iter()
+            .zip(&radii)
+            .map(|(g, r)| {
+                angle += (g + 0.2) / total * std::f64::consts::TAU;
+                Coord { x: r * angle.cos(), y: r * angle.sin() }
+            })
+            .collect();
+        Shape::new(LineString::from(pts), vec![])
+    })
+}
+
+fn with_hole(s: Shape<f64>, hole: bool) -> Shape<f64> {
+    if !hole {
+        return s;
+    }
+    // Every star's radii are at least 0.3: a square of half-side 0.1 round the origin fits.
+    let h = LineString::from(vec![(-0.1, -0.1), (-0.1, 0.1), (0.1, 0.1), (0.1, -0.1)]);
+    Shape::new(s.exterior().clone(), vec![h])
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    #[test]
+    fn convex_pieces_are_convex_and_tile_the_polygon(s in star(12), hole in any::<bool>()) {
+        let s = with_hole(s, hole);
+        let pieces = convex_pieces(&s);
+        prop_assert!(!pieces.is_empty());
+        let area = s.unsigned_area();
+        let mut sum = 0.0;
+        let mut union = geo::MultiPolygon::<f64>(vec![]);
+        for p in &pieces {
+            let n = p.len();
+            prop_assert!(n >= 3);
+            for i in 0..n {
+                let (a, b, c) = (p[i], p[(i + 1) % n], p[(i + 2) % n]);
+                let cross = (b.x - a.x) * (c.y - b.y) - (b.y - a.y) * (c.x - b.x);
+                prop_assert!(cross >= -1e-12, "a right turn in piece {p:?}");
+            }
+            let shape = Shape::new(LineString::from(p.clone()), vec![]);
+            sum += shape.unsigned_area();
+            union = union.union(&shape);
+        }
+        prop_assert!((sum - area).abs() <= 1e-9 * area, "pieces {sum} vs polygon {area}");
+        let diff = union.xor(&geo::MultiPolygon(vec![s.clone()])).unsigned_area();
+        // Boolean operations snap to a fixed grid: their own round-off is about 1e-9 m^2.
+        prop_assert!(diff <= 1e-7 * area, "pieces and polygon differ by {diff}");
+    }
+
+    #[test]
+    fn union_of_overlapping_polygons_contains_both(a in star(9), b in star(9), dx in -0.3..0.3f64, dy in -0.3..0.3f64) {
+        use geo::Translate;
+        let b = b.translate(dx, dy);
+        let u = polymap::map::geometry::union(&a, &b).expect("they overlap round the origin");
+        let u = geo::MultiPolygon(vec![u]);
+        for s in [&a, &b] {
+            let outside = geo::MultiPolygon(vec![s.clone()]).difference(&u).unsigned_area();
+            // Boolean operations snap to a fixed grid: their own round-off is about 1e-9 m^2.
+            prop_assert!(outside <= 1e-7 * s.unsigned_area(), "{outside} m^2 of a part is outside the union");
+        }
+        let expected = a.unsigned_area() + b.unsigned_area() - a.intersection(&b).unsigned_area();
+        prop_assert!((u.unsigned_area() - expected).abs() <= 1e-7 * expected);
+    }
+}
