@@ -149,6 +149,7 @@ struct Match {
     dz: f64,
 }
 
+#[derive(Clone)]
 pub struct PolygonMap {
     cfg: MapConfig,
     entries: BTreeMap<u64, Entry>,

@@ -1,0 +1,69 @@
+//! Map update cost with 300 polygons in the map: each timed frame re-observes 12 of them
+//! (merge, drift measurement, relabelling) and checks all 300 against a 320x240 depth image
+//! for clearing. Prints median and p99 over 1000 frames, then the cost of publishing the
+//! changed polygons (convex pieces and insets), which happens only when they are sent.
+//!
+//! cargo bench --bench map
+
+use std::time::Instant;
+
+use nalgebra::Isometry3;
+use polymap::bench::spread;
+use polymap::config::MapConfig;
+use polymap::extract::{Grid, Polygon};
+use polymap::map::PolygonMap;
+use polymap::synth::path::camera_pose;
+use polymap::types::Intrinsics;
+
+/// A 20 x 15 grid of 0.2 m tiles, 0.1 m apart, at heights cycling through 7 steps.
+fn tile(i: usize) -> ([f64; 2], f64) {
+    let (col, row) = ((i % 20) as f64, (i / 20) as f64);
+    ([col * 0.3, row * 0.3 - 2.25], (i % 7) as f64 * 0.15)
+}
+
+fn seen(i: usize, t_camera_world: &Isometry3<f64>) -> Polygon {
+    let ([x, y], z) = tile(i);
+    let world = Polygon {
+        id: i as u32,
+        normal: [0.0, 0.0, 1.0],
+        offset: -z,
+        area: 0.04,
+        boundary: vec![[x, y, z], [x + 0.2, y, z], [x + 0.2, y + 0.2, z], [x + 0.1, y + 0.25, z], [x, y + 0.2, z]],
+        holes: vec![],
+        pixel_count: 2000,
+        inlier_ratio: 1.0,
+        rms: 0.002,
+    };
+    world.transformed(t_camera_world)
+}
+
+fn main() {
+    let intr = Intrinsics::L515_320X240;
+    let pose = camera_pose(nalgebra::Point3::new(-1.0, 0.0, 1.5), 0.0, 40f64.to_radians(), 0.0);
+    let inv = pose.inverse();
+    let mut map = PolygonMap::new(&MapConfig::default());
+    let all: Vec<Polygon> = (0..300).map(|i| seen(i, &inv)).collect();
+    map.update(&all, &pose, &intr, None);
+    assert_eq!(map.len(), 300, "the tiles stay apart");
+    // Every sample of every polygon is projected and looked up; the depth is all invalid so
+    // that nothing is cleared and the map keeps its 300 polygons.
+    let depth = Grid { width: 320, height: 240, data: vec![0.0f32; 320 * 240] };
+    // `cargo test --all-targets` runs benches without --bench: a short smoke run then.
+    let frames = if std::env::args().any(|a| a == "--bench") { 1000 } else { 20 };
+    let (mut update_ms, mut publish_ms) = (Vec::with_capacity(frames), Vec::with_capacity(frames));
+    for k in 0..frames {
+        let polys: Vec<Polygon> = (0..12).map(|j| seen((k * 7 + j * 25) % 300, &inv)).collect();
+        let t = Instant::now();
+        let update = map.update(&polys, &pose, &intr, Some(&depth));
+        update_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        let t = Instant::now();
+        for id in update.changed.iter().chain(&update.added) {
+            std::hint::black_box(map.polygon(*id));
+        }
+        publish_ms.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let (u, p) = (spread(&update_ms), spread(&publish_ms));
+    println!("map update, 300 polygons, 12 observed per frame, clearing on: median {:.3} ms, p99 {:.3} ms", u.median, u.p99);
+    println!("publishing the changed polygons (convex pieces, insets): median {:.3} ms, p99 {:.3} ms", p.median, p.p99);
+    assert_eq!(map.len(), 300);
+}
