@@ -63,7 +63,10 @@ fn main() {
         publish_ms.push(t.elapsed().as_secs_f64() * 1e3);
     }
     let (u, p) = (spread(&update_ms), spread(&publish_ms));
-    println!("map update, 300 polygons, 12 observed per frame, clearing on: median {:.3} ms, p99 {:.3} ms", u.median, u.p99);
+    println!(
+        "map update, 300 polygons, 12 observed per frame, clearing on: median {:.3} ms, p99 {:.3} ms",
+        u.median, u.p99
+    );
     println!("publishing the changed polygons (convex pieces, insets): median {:.3} ms, p99 {:.3} ms", p.median, p.p99);
     assert_eq!(map.len(), 300);
 }

@@ -66,7 +66,7 @@ fn straight_stairs_with_drift_map_true_to_the_truth() {
     assert_eq!(with.treads_found, with.treads_seen, "every tread seen is in the map");
     assert!(with.iou_mean >= 0.95, "IOU mean {:.3}", with.iou_mean);
     // The top tread seen is seen well only by the last frame or two.
-    assert!(with.iou_min >= 0.93, "IOU min {:.3}", with.iou_min);
+    assert!(with.iou_min >= 0.94, "IOU min {:.3}", with.iou_min);
     assert!(with.step_error_mean_mm <= 1.0, "step-height error {:.2} mm", with.step_error_mean_mm);
     assert!(with.height_error_max_mm <= 5.0, "height error {:.2} mm", with.height_error_max_mm);
     assert!(with.drift_error_mm.abs() <= 5.0, "drift estimate off by {:.2} mm", with.drift_error_mm);

@@ -391,8 +391,7 @@ impl PolygonMap {
         self.next_id += 1;
         let centre = o.moments.sum / o.moments.weight.max(1e-12);
         let frame = PlaneFrame::new(centre, o.plane.normal);
-        let shape = o.shape_in(&frame).unwrap_or_else(|| frame.shape(&o.boundary, &o.holes));
-        let shape = geometry::simplify_to(&shape, self.cfg.max_vertices);
+        let shape = geometry::simplify_to(&frame.shape(&o.boundary, &o.holes), self.cfg.max_vertices);
         let mut e = Entry {
             frame,
             shape,
@@ -409,7 +408,7 @@ impl PolygonMap {
             published: None,
             seen: o.shape_in(&frame),
             confirmed: None,
-            latest: o.shape_in(&frame),
+            latest: Some(frame.shape(&o.boundary, &o.holes)),
         };
         refresh(&mut e);
         self.entries.insert(id, e);
@@ -428,7 +427,8 @@ impl PolygonMap {
                 e.confirmed = union_into(e.confirmed.take(), twice, max_vertices);
             }
             e.seen = union_into(e.seen.take(), view.clone(), max_vertices);
-            e.latest = Some(view);
+            // The latest view shows as the frame saw it: it is replaced by the next one.
+            e.latest = Some(e.frame.shape(&o.boundary, &o.holes));
             e.shape = shown(e.confirmed.as_ref(), e.latest.as_ref(), max_vertices).unwrap_or(e.shape.clone());
         }
         e.moments.add(&o.moments);
@@ -589,9 +589,9 @@ fn shown(confirmed: Option<&Shape<f64>>, latest: Option<&Shape<f64>>, max_vertic
 
 /// A frame's outline is uncertain by about this many pixel footprints: its edge pixels are
 /// mixed, closed over, or belong to the neighbouring surface within the inlier distance, and
-/// ray-cast at a grazing angle each lands a whole footprint away. A union keeps every
-/// frame's overshoot, so each outline is pulled in by this much before it joins; the
-/// nearest views, whose footprints are smallest, then set the map's edges.
+/// ray-cast at a grazing angle each lands a whole footprint away. A union would keep every
+/// frame's overshoot, so each outline is pulled in by this much before it is kept for good;
+/// the nearest views, whose footprints are smallest, then set the map's edges.
 const OUTLINE_UNCERTAINTY_PX: f64 = 1.5;
 /// The most an outline is pulled in, m.
 const MAX_ERODE_M: f64 = 0.05;
