@@ -10,6 +10,7 @@ pub mod config;
 pub mod eval;
 pub mod extract;
 pub mod map;
+pub mod pose;
 pub mod replay;
 pub mod sequence;
 pub mod synth;

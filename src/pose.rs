@@ -1,0 +1,151 @@
+//! Time-indexed odometry poses: each depth frame gets the pose at its own stamp, linearly
+//! interpolated in position and slerped in rotation between the two poses around it.
+//! A frame before the first pose, after the last, or in a gap wider than `max_gap` gets no
+//! pose: it is never mapped with a stale or extrapolated one.
+//!
+//! Poses come from outside (VINS over Zenoh), so each one is checked on the way in: a bad
+//! one is refused with what was wrong, counted, and leaves the buffer as it was.
+
+use std::collections::VecDeque;
+
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use serde::Serialize;
+
+use crate::types::{Pose, StampNs};
+
+/// A pose as a message carries it, before any check.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RawPose {
+    pub stamp_ns: StampNs,
+    pub position: [f64; 3],
+    pub quat_xyzw: [f64; 4],
+}
+
+/// Why a pose was refused.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum PoseRejected {
+    #[error("pose at {stamp_ns} ns has a non-finite position {position:?}")]
+    BadPosition { stamp_ns: StampNs, position: [f64; 3] },
+    #[error("pose at {stamp_ns} ns has quaternion {quat_xyzw:?} of norm {norm}, not a rotation")]
+    BadQuaternion { stamp_ns: StampNs, quat_xyzw: [f64; 4], norm: f64 },
+    #[error("pose stamp {stamp_ns} ns is not after the previous one, {last_ns} ns")]
+    StampNotIncreasing { stamp_ns: StampNs, last_ns: StampNs },
+}
+
+/// Why a frame has no pose.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum NoPose {
+    #[error("no pose received yet")]
+    Empty,
+    #[error("frame at {stamp_ns} ns is before the oldest pose kept ({first_ns} ns)")]
+    TooOld { stamp_ns: StampNs, first_ns: StampNs },
+    #[error("frame at {stamp_ns} ns is after the newest pose ({last_ns} ns): not extrapolated")]
+    NotYet { stamp_ns: StampNs, last_ns: StampNs },
+    #[error("frame at {stamp_ns} ns falls in a {gap_ms:.1} ms gap between poses (at most {max_ms:.1} ms)")]
+    Gap { stamp_ns: StampNs, gap_ms: f64, max_ms: f64 },
+}
+
+/// Running totals of what came in.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct PoseCounters {
+    pub accepted: u64,
+    pub rejected: u64,
+    /// Lookups that found no pose (each skipped frame).
+    pub missing: u64,
+}
+
+pub struct PoseBuffer {
+    poses: VecDeque<Pose>,
+    capacity: usize,
+    max_gap_ns: u64,
+    pub counters: PoseCounters,
+}
+
+impl PoseBuffer {
+    /// Keeps the newest `capacity` poses; frames between poses further apart than
+    /// `max_gap_ns` get none.
+    pub fn new(capacity: usize, max_gap_ns: u64) -> PoseBuffer {
+        PoseBuffer { poses: VecDeque::with_capacity(capacity), capacity: capacity.max(2), max_gap_ns, counters: PoseCounters::default() }
+    }
+
+    pub fn len(&self) -> usize {
+        self.poses.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.poses.is_empty()
+    }
+
+    /// Checks and keeps one pose; the oldest is dropped when full.
+    pub fn push(&mut self, raw: &RawPose) -> Result<(), PoseRejected> {
+        let checked = check(raw, self.poses.back().map(|p| p.stamp_ns));
+        match checked {
+            Ok(pose) => {
+                if self.poses.len() == self.capacity {
+                    self.poses.pop_front();
+                }
+                self.poses.push_back(pose);
+                self.counters.accepted += 1;
+                Ok(())
+            }
+            Err(e) => {
+                self.counters.rejected += 1;
+                Err(e)
+            }
+        }
+    }
+
+    /// The pose at `stamp_ns`, interpolated between its neighbours.
+    pub fn at(&mut self, stamp_ns: StampNs) -> Result<Isometry3<f64>, NoPose> {
+        let found = self.lookup(stamp_ns);
+        if found.is_err() {
+            self.counters.missing += 1;
+        }
+        found
+    }
+
+    fn lookup(&self, stamp_ns: StampNs) -> Result<Isometry3<f64>, NoPose> {
+        let (first, last) = match (self.poses.front(), self.poses.back()) {
+            (Some(f), Some(l)) => (f, l),
+            _ => return Err(NoPose::Empty),
+        };
+        if stamp_ns < first.stamp_ns {
+            return Err(NoPose::TooOld { stamp_ns, first_ns: first.stamp_ns });
+        }
+        if stamp_ns > last.stamp_ns {
+            return Err(NoPose::NotYet { stamp_ns, last_ns: last.stamp_ns });
+        }
+        // The first pose at or after the stamp, and the one before it.
+        let i = self.poses.partition_point(|p| p.stamp_ns < stamp_ns);
+        let b = &self.poses[i];
+        if b.stamp_ns == stamp_ns {
+            return Ok(b.transform);
+        }
+        let a = &self.poses[i - 1];
+        let gap = b.stamp_ns - a.stamp_ns;
+        if gap > self.max_gap_ns {
+            return Err(NoPose::Gap { stamp_ns, gap_ms: gap as f64 * 1e-6, max_ms: self.max_gap_ns as f64 * 1e-6 });
+        }
+        let t = (stamp_ns - a.stamp_ns) as f64 / gap as f64;
+        let p = a.transform.translation.vector.lerp(&b.transform.translation.vector, t);
+        let r = a.transform.rotation.slerp(&b.transform.rotation, t);
+        Ok(Isometry3::from_parts(Translation3::from(p), r))
+    }
+}
+
+/// A checked pose: finite position, unit quaternion, stamp after `last_ns`.
+fn check(raw: &RawPose, last_ns: Option<StampNs>) -> Result<Pose, PoseRejected> {
+    let RawPose { stamp_ns, position, quat_xyzw: q } = *raw;
+    if !position.iter().all(|v| v.is_finite()) {
+        return Err(PoseRejected::BadPosition { stamp_ns, position });
+    }
+    let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+    if !((norm - 1.0).abs() <= crate::sequence::QUATERNION_NORM_TOLERANCE) {
+        return Err(PoseRejected::BadQuaternion { stamp_ns, quat_xyzw: q, norm });
+    }
+    if let Some(last_ns) = last_ns.filter(|&l| stamp_ns <= l) {
+        return Err(PoseRejected::StampNotIncreasing { stamp_ns, last_ns });
+    }
+    let rotation = UnitQuaternion::from_quaternion(Quaternion::new(q[3], q[0], q[1], q[2]));
+    Ok(Pose { stamp_ns, transform: Isometry3::from_parts(Translation3::from(Vector3::from(position)), rotation) })
+}
