@@ -6,12 +6,15 @@
 //! (metres, radians, nanosecond stamps, `T_a_b` maps frame b into frame a).
 
 pub mod bench;
+pub mod bus;
 pub mod config;
 pub mod eval;
 pub mod extract;
 pub mod map;
+pub mod mock_vins;
 pub mod pose;
 pub mod replay;
+pub mod ros;
 pub mod sequence;
 pub mod synth;
 pub mod types;

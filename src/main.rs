@@ -129,6 +129,23 @@ enum Command {
         #[arg(long, value_enum)]
         backend: Option<Backend>,
     },
+    /// Publish a sequence's poses as VINS would: nav_msgs/Odometry (ROS 2 CDR) over Zenoh
+    /// on the config's pose key, the sequence looped on the wall clock
+    MockVins {
+        seq: PathBuf,
+        /// Poses per second
+        #[arg(long, default_value_t = 30.0)]
+        rate: f64,
+        /// Vertical drift added to the poses, mm per second
+        #[arg(long, default_value_t = 0.0)]
+        drift: f64,
+        /// Stop after this many seconds (default: run until interrupted)
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Zenoh settings ([zenoh] config_file, pose_key) from this config file
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
     /// Check a config file and print it with every default filled in
     Config { file: PathBuf },
 }
@@ -255,6 +272,26 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bench { seq, backend, frames, config, json } => {
             let config = load_config(config, backend)?;
             bench(&Sequence::open(&seq)?, &config, frames, json)?;
+        }
+        Command::MockVins { seq, rate, drift, duration, config } => {
+            let config = load_config(config, None)?;
+            let s = Sequence::open(&seq)?;
+            if duration.is_some_and(|d| !(d.is_finite() && d > 0.0)) {
+                bail!("--duration must be a positive number of seconds");
+            }
+            let opts = polymap::mock_vins::MockVinsOptions {
+                rate_hz: rate,
+                drift_mm_per_s: drift,
+                duration: duration.map(std::time::Duration::from_secs_f64),
+            };
+            let runtime = tokio::runtime::Runtime::new()?;
+            let sent = runtime.block_on(async {
+                tokio::select! {
+                    r = polymap::mock_vins::run(&s, &config.zenoh, opts) => r,
+                    _ = tokio::signal::ctrl_c() => Ok(0),
+                }
+            })?;
+            tracing::info!("mock VINS: {sent} poses published");
         }
         Command::Config { file } => {
             let config = Config::load(&file)?;

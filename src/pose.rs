@@ -49,7 +49,10 @@ pub enum NoPose {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct PoseCounters {
     pub accepted: u64,
+    /// Decoded but refused by the checks.
     pub rejected: u64,
+    /// Messages that did not decode at all.
+    pub undecodable: u64,
     /// Lookups that found no pose (each skipped frame).
     pub missing: u64,
 }
@@ -65,7 +68,12 @@ impl PoseBuffer {
     /// Keeps the newest `capacity` poses; frames between poses further apart than
     /// `max_gap_ns` get none.
     pub fn new(capacity: usize, max_gap_ns: u64) -> PoseBuffer {
-        PoseBuffer { poses: VecDeque::with_capacity(capacity), capacity: capacity.max(2), max_gap_ns, counters: PoseCounters::default() }
+        PoseBuffer {
+            poses: VecDeque::with_capacity(capacity),
+            capacity: capacity.max(2),
+            max_gap_ns,
+            counters: PoseCounters::default(),
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -74,6 +82,11 @@ impl PoseBuffer {
 
     pub fn is_empty(&self) -> bool {
         self.poses.is_empty()
+    }
+
+    /// The poses kept, oldest first.
+    pub fn poses(&self) -> impl Iterator<Item = &Pose> {
+        self.poses.iter()
     }
 
     /// Checks and keeps one pose; the oldest is dropped when full.
