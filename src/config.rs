@@ -261,6 +261,8 @@ pub struct ZenohConfig {
     pub robot: String,
     /// Key expression of the VINS odometry (nav_msgs/Odometry, ROS 2 CDR).
     pub pose_key: String,
+    /// A frame between two poses further apart than this gets no pose and is skipped, s.
+    pub pose_max_gap_s: f64,
 }
 
 impl Default for ZenohConfig {
@@ -270,6 +272,7 @@ impl Default for ZenohConfig {
             key_prefix: "polymap".into(),
             robot: "leju".into(),
             pose_key: "vins_estimator/odometry".into(),
+            pose_max_gap_s: 0.1,
         }
     }
 }
@@ -380,6 +383,7 @@ impl Config {
         }
 
         let z = &self.zenoh;
+        check_range("zenoh.pose_max_gap_s", z.pose_max_gap_s, 0.001, 10.0)?;
         for (key, v) in
             [("zenoh.key_prefix", &z.key_prefix), ("zenoh.robot", &z.robot), ("zenoh.pose_key", &z.pose_key)]
         {

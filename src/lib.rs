@@ -10,6 +10,7 @@ pub mod bus;
 pub mod config;
 pub mod eval;
 pub mod extract;
+pub mod live;
 pub mod map;
 pub mod mock_vins;
 pub mod pose;

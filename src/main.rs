@@ -129,6 +129,15 @@ enum Command {
         #[arg(long, value_enum)]
         backend: Option<Backend>,
     },
+    /// The live mapper: depth source -> extraction -> map, poses in and polygons out over Zenoh
+    Run {
+        /// Settings (default: the built-in defaults: the mock camera on the bundled stairs)
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Stop after this many seconds (default: until SIGINT / SIGTERM)
+        #[arg(long)]
+        duration: Option<f64>,
+    },
     /// Publish a sequence's poses as VINS would: nav_msgs/Odometry (ROS 2 CDR) over Zenoh
     /// on the config's pose key, the sequence looped on the wall clock
     MockVins {
@@ -272,6 +281,18 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bench { seq, backend, frames, config, json } => {
             let config = load_config(config, backend)?;
             bench(&Sequence::open(&seq)?, &config, frames, json)?;
+        }
+        Command::Run { config, duration } => {
+            let config = load_config(config, None)?;
+            if duration.is_some_and(|d| !(d.is_finite() && d > 0.0)) {
+                bail!("--duration must be a positive number of seconds");
+            }
+            let runtime = tokio::runtime::Runtime::new()?;
+            let s = runtime.block_on(polymap::live::run(&config, duration.map(std::time::Duration::from_secs_f64)))?;
+            tracing::info!(
+                "stopped: {} frames in, {} processed, {} dropped, {} without pose; map of {} polygons saved",
+                s.frames_in, s.processed, s.dropped, s.without_pose, s.map_polygons
+            );
         }
         Command::MockVins { seq, rate, drift, duration, config } => {
             let config = load_config(config, None)?;

@@ -150,3 +150,131 @@ pub fn odometry(pose: &RawPose, frame_id: &str, child_frame_id: &str) -> Odometr
         twist: TwistWithCovariance { twist: Twist::default(), covariance: [0.0; 36] },
     }
 }
+
+// polymap's own messages (msg/*.msg define them for ROS 2 tools).
+
+/// polymap_msgs/Ring
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Ring {
+    pub points: Vec<Point>,
+}
+
+/// polymap_msgs/Polygon: a planar polygon in the world frame.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PolygonMsg {
+    pub id: u64,
+    /// floor, tread, landing, riser, wall, slope; "" for a frame's polygon.
+    pub label: String,
+    /// Step index, -1 for none.
+    pub step: i32,
+    pub normal: [f64; 3],
+    pub offset: f64,
+    pub area: f64,
+    pub centroid: Point,
+    pub boundary: Vec<Point>,
+    pub holes: Vec<Ring>,
+    pub convex_pieces: Vec<Ring>,
+    pub inset: Vec<Point>,
+    pub observations: u32,
+}
+
+/// polymap_msgs/FramePolygons: one frame's polygons, as extracted, in the world frame.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct FramePolygonsMsg {
+    pub header: Header,
+    pub polygons: Vec<PolygonMsg>,
+}
+
+/// polymap_msgs/MapUpdate: what one frame changed in the map.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MapUpdateMsg {
+    pub header: Header,
+    pub added: Vec<PolygonMsg>,
+    pub changed: Vec<PolygonMsg>,
+    pub removed: Vec<u64>,
+    pub drift_z: f64,
+    pub drift_var: f64,
+}
+
+/// polymap_msgs/Map: the whole map.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MapMsg {
+    pub header: Header,
+    pub drift_z: f64,
+    pub drift_var: f64,
+    pub polygons: Vec<PolygonMsg>,
+}
+
+/// polymap_msgs/Foothold: the convex piece under a queried point (or the nearest).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct FootholdMsg {
+    pub header: Header,
+    pub found: bool,
+    /// The piece contains the point (seen from above) rather than being the nearest.
+    pub contains: bool,
+    pub polygon_id: u64,
+    pub label: String,
+    pub normal: [f64; 3],
+    pub offset: f64,
+    pub piece: Vec<Point>,
+    /// Horizontal distance from the point to the piece, m (0 when it contains it).
+    pub distance: f64,
+}
+
+/// polymap_msgs/Status: once a second.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StatusMsg {
+    pub header: Header,
+    pub frames_in: u64,
+    pub frames_processed: u64,
+    pub frames_dropped: u64,
+    pub frames_without_pose: u64,
+    pub latency_median_ms: f64,
+    pub latency_p99_ms: f64,
+    pub poses_accepted: u64,
+    pub poses_refused: u64,
+    pub drift_z: f64,
+    pub map_polygons: u32,
+}
+
+pub fn point(p: &[f64; 3]) -> Point {
+    Point { x: p[0], y: p[1], z: p[2] }
+}
+
+fn ring(r: &[[f64; 3]]) -> Ring {
+    Ring { points: r.iter().map(point).collect() }
+}
+
+impl PolygonMsg {
+    pub fn of_map(p: &crate::map::MapPolygon) -> PolygonMsg {
+        PolygonMsg {
+            id: p.id,
+            label: serde_json::to_value(p.label).ok().and_then(|v| v.as_str().map(String::from)).unwrap_or_default(),
+            step: p.step.map_or(-1, |s| s as i32),
+            normal: p.normal,
+            offset: p.offset,
+            area: p.area,
+            centroid: point(&p.centroid),
+            boundary: p.boundary.iter().map(point).collect(),
+            holes: p.holes.iter().map(|h| ring(h)).collect(),
+            convex_pieces: p.convex_pieces.iter().map(|h| ring(h)).collect(),
+            inset: p.inset.iter().map(point).collect(),
+            observations: p.observations,
+        }
+    }
+
+    pub fn of_frame(p: &crate::extract::Polygon) -> PolygonMsg {
+        PolygonMsg {
+            id: p.id as u64,
+            step: -1,
+            normal: p.normal,
+            offset: p.offset,
+            area: p.area,
+            centroid: point(&p.centroid()),
+            boundary: p.boundary.iter().map(point).collect(),
+            holes: p.holes.iter().map(|h| ring(h)).collect(),
+            observations: 1,
+            ..PolygonMsg::default()
+        }
+    }
+}

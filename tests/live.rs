@@ -1,0 +1,169 @@
+//! End to end: the mock VINS and the mapper (`polymap run`, mock camera) as separate
+//! processes and Zenoh peers on loopback; this test, a third peer, receives frame polygons
+//! and map updates, queries the map and a foothold, and scores the map against the truth.
+
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use polymap::map::{Label, MapPolygon, MapSnapshot};
+use polymap::ros::{self, FootholdMsg, FramePolygonsMsg, MapMsg, MapUpdateMsg, PolygonMsg};
+use polymap::sequence::Sequence;
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+fn json5(dir: &Path, name: &str, listen: Option<u16>, connect: Option<u16>) -> String {
+    let listen = listen.map_or("tcp/127.0.0.1:0".to_string(), |p| format!("tcp/127.0.0.1:{p}"));
+    let connect = connect.map_or(String::new(), |p| format!("\"tcp/127.0.0.1:{p}\""));
+    let path = dir.join(format!("{name}.json5"));
+    std::fs::write(
+        &path,
+        format!(
+            r#"{{ mode: "peer", listen: {{ endpoints: ["{listen}"] }}, connect: {{ endpoints: [{connect}] }},
+                scouting: {{ multicast: {{ enabled: false }}, gossip: {{ enabled: false }} }} }}"#
+        ),
+    )
+    .unwrap();
+    path.display().to_string()
+}
+
+fn to_snapshot(m: &MapMsg) -> MapSnapshot {
+    let pt = |p: &ros::Point| [p.x, p.y, p.z];
+    let polygon = |p: &PolygonMsg| MapPolygon {
+        id: p.id,
+        label: serde_json::from_value(serde_json::Value::String(p.label.clone())).unwrap(),
+        normal: p.normal,
+        offset: p.offset,
+        area: p.area,
+        centroid: pt(&p.centroid),
+        boundary: p.boundary.iter().map(pt).collect(),
+        holes: p.holes.iter().map(|r| r.points.iter().map(pt).collect()).collect(),
+        convex_pieces: p.convex_pieces.iter().map(|r| r.points.iter().map(pt).collect()).collect(),
+        inset: p.inset.iter().map(pt).collect(),
+        observations: p.observations,
+        step: (p.step >= 0).then_some(p.step as u32),
+    };
+    MapSnapshot {
+        frame: "world".into(),
+        drift_z: m.drift_z,
+        drift_var: m.drift_var,
+        stair: None,
+        polygons: m.polygons.iter().map(polygon).collect(),
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let seq_dir = root.join("mock_frames/straight_320");
+    let port = free_port();
+    let snapshot = dir.path().join("map.json");
+    let mapper_cfg = dir.path().join("mapper.toml");
+    std::fs::write(
+        &mapper_cfg,
+        format!(
+            "[sources.depth]\nsequence = {:?}\n[pipeline]\nbackend = \"cpu\"\n[map]\nsnapshot_path = {:?}\n[zenoh]\nconfig_file = {:?}\n",
+            seq_dir.display().to_string(),
+            snapshot.display().to_string(),
+            json5(dir.path(), "mapper", Some(port), None)
+        ),
+    )
+    .unwrap();
+    let vins_cfg = dir.path().join("vins.toml");
+    std::fs::write(&vins_cfg, format!("[zenoh]\nconfig_file = {:?}\n", json5(dir.path(), "vins", None, Some(port))))
+        .unwrap();
+    let bin = env!("CARGO_BIN_EXE_polymap");
+    let mut mapper = std::process::Command::new(bin)
+        .args(["run", "--duration", "8", "--config"])
+        .arg(&mapper_cfg)
+        .stderr(std::fs::File::create(dir.path().join("mapper.log")).unwrap())
+        .spawn()
+        .unwrap();
+    let mut vins = std::process::Command::new(bin)
+        .args(["mock-vins", seq_dir.to_str().unwrap(), "--rate", "100", "--duration", "9", "--config"])
+        .arg(&vins_cfg)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+
+    // This test is a third peer, connected to the mapper.
+    let me = polymap::config::ZenohConfig {
+        config_file: json5(dir.path(), "test", None, Some(port)).into(),
+        ..Default::default()
+    };
+    let mut session = None;
+    for _ in 0..100 {
+        // The mapper may not be listening yet.
+        if let Ok(s) = polymap::bus::open_session(&me).await {
+            if s.info().peers_zid().await.next().is_some() {
+                session = Some(s);
+                break;
+            }
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let session = session.expect("the mapper's Zenoh peer never answered");
+    let (frames, updates) = (Arc::new(AtomicU64::new(0)), Arc::new(AtomicU64::new(0)));
+    let f = frames.clone();
+    let _frames_sub = session
+        .declare_subscriber("polymap/leju/frame/polygons")
+        .callback(move |s| {
+            let m: FramePolygonsMsg = ros::decode(&s.payload().to_bytes()).expect("frame polygons decode");
+            if !m.polygons.is_empty() {
+                f.fetch_add(1, Ordering::Relaxed);
+            }
+        })
+        .await
+        .unwrap();
+    let u = updates.clone();
+    let _updates_sub = session
+        .declare_subscriber("polymap/leju/map/updates")
+        .callback(move |s| {
+            let m: MapUpdateMsg = ros::decode(&s.payload().to_bytes()).expect("map update decode");
+            u.fetch_add((m.added.len() + m.changed.len()) as u64, Ordering::Relaxed);
+        })
+        .await
+        .unwrap();
+
+    tokio::time::sleep(Duration::from_secs(5)).await;
+    assert!(frames.load(Ordering::Relaxed) >= 10, "frame polygons arrive: {}", frames.load(Ordering::Relaxed));
+    assert!(updates.load(Ordering::Relaxed) >= 10, "map updates arrive");
+
+    let replies = session.get("polymap/leju/map").await.unwrap();
+    let reply = replies.recv_async().await.expect("the map answers");
+    let map: MapMsg = ros::decode(&reply.result().expect("a map, not an error").payload().to_bytes()).unwrap();
+    let snap = to_snapshot(&map);
+    let seq = Sequence::open(&seq_dir).unwrap();
+    let (scores, _) = polymap::eval::map::score_map(&snap, &seq, false).unwrap();
+    let summary = polymap::eval::map::summarise(&scores, &snap, &seq);
+    eprintln!("live map against the truth: {summary:?}");
+    assert!(summary.treads_seen >= 5 && summary.treads_found == summary.treads_seen, "{summary:?}");
+    assert!(summary.iou_mean >= 0.85, "{summary:?}");
+    assert!(summary.height_error_max_mm <= 10.0, "{summary:?}");
+
+    // A foothold at the middle of tread 2 (x 0.28..0.56, z 0.30) is a piece of that tread.
+    let tread2 = scores.iter().find(|s| s.step == 2).and_then(|s| s.polygon).expect("tread 2 mapped");
+    let replies = session.get("polymap/leju/foothold?x=0.42;y=0.0;z=0.30").await.unwrap();
+    let reply = replies.recv_async().await.expect("the foothold answers");
+    let fh: FootholdMsg = ros::decode(&reply.result().expect("a foothold").payload().to_bytes()).unwrap();
+    assert!(fh.found && fh.contains, "{fh:?}");
+    assert_eq!(fh.polygon_id, tread2);
+    assert_eq!(fh.label, "tread");
+    // A malformed foothold query gets an error that names what is wrong.
+    let replies = session.get("polymap/leju/foothold?x=oops").await.unwrap();
+    let reply = replies.recv_async().await.expect("an answer");
+    let err = reply.result().err().expect("an error reply");
+    assert!(String::from_utf8_lossy(&err.payload().to_bytes()).contains("x, y and z"));
+
+    let status = tokio::task::spawn_blocking(move || mapper.wait()).await.unwrap().unwrap();
+    let _ = vins.kill();
+    let log = std::fs::read_to_string(dir.path().join("mapper.log")).unwrap();
+    assert!(status.success(), "{log}");
+    assert!(log.contains("latency median"), "live status is printed: {log}");
+    let saved: MapSnapshot = serde_json::from_str(&std::fs::read_to_string(&snapshot).unwrap()).unwrap();
+    assert!(saved.polygons.iter().any(|p| p.label == Label::Tread), "the map is saved at shutdown");
+}
