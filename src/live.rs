@@ -71,6 +71,8 @@ pub struct RunSummary {
     pub dropped: u64,
     pub without_pose: u64,
     pub map_polygons: usize,
+    /// Frame stamp to published, over the whole run, ms.
+    pub latency: crate::bench::Spread,
 }
 
 /// The keys polymap publishes and answers on, under `<key_prefix>/<robot>/`.
@@ -115,7 +117,8 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
 
     // Extraction, pose lookup and map update on their own thread: CPU/GPU work off the runtime.
     let worker = {
-        let (slot, stop, poses, map, counters) = (slot.clone(), stop.clone(), poses.clone(), map.clone(), counters.clone());
+        let (slot, stop, poses, map, counters) =
+            (slot.clone(), stop.clone(), poses.clone(), map.clone(), counters.clone());
         let config = config.clone();
         let intrinsics = seq.intrinsics;
         let body_camera = extrinsic(&config);
@@ -157,7 +160,10 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
                 };
                 drop(m);
                 counters.processed.fetch_add(1, Ordering::Relaxed);
-                if out_tx.blocking_send(Outgoing { stamp_ns: frame.stamp_ns, frame: frame_msg, update: update_msg }).is_err() {
+                if out_tx
+                    .blocking_send(Outgoing { stamp_ns: frame.stamp_ns, frame: frame_msg, update: update_msg })
+                    .is_err()
+                {
                     break;
                 }
             }
@@ -244,6 +250,7 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
 
     let started = Instant::now();
     let mut latencies: Vec<f64> = Vec::new();
+    let mut all_latencies: Vec<f64> = Vec::new();
     let mut status_tick = tokio::time::interval(Duration::from_secs(1));
     let mut snapshot_tick = tokio::time::interval(Duration::from_secs_f64(config.map.snapshot_period_s));
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
@@ -263,7 +270,7 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
             }
             _ = status_tick.tick() => {
                 let status = status_msg(&counters, &poses, &map, &latencies);
-                latencies.clear();
+                all_latencies.append(&mut latencies);
                 tracing::info!(
                     "frames in {} processed {} dropped {} without pose {}; latency median {:.1} ms p99 {:.1} ms; poses {} (refused {}); drift {:.1} mm; map {} polygons",
                     status.frames_in, status.frames_processed, status.frames_dropped, status.frames_without_pose,
@@ -286,6 +293,7 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
     drop(out_rx);
     worker.join().map_err(|_| anyhow!("the extractor thread panicked"))??;
     drop((map_q, foothold_q));
+    all_latencies.append(&mut latencies);
     let mut m = map.lock().expect("map lock");
     crate::replay::save_snapshot(&mut m, config).context("saving the map at shutdown")?;
     Ok(RunSummary {
@@ -294,6 +302,7 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
         dropped: counters.dropped.load(Ordering::Relaxed),
         without_pose: counters.without_pose.load(Ordering::Relaxed),
         map_polygons: m.len(),
+        latency: crate::bench::spread(&all_latencies),
     })
 }
 
@@ -408,4 +417,41 @@ fn distance_xy(ring: &[[f64; 3]], q: [f64; 2]) -> f64 {
         nearest = nearest.min((a[0] + t * dx - q[0]).hypot(a[1] + t * dy - q[1]));
     }
     if inside { 0.0 } else { nearest }
+}
+
+/// A Zenoh peer on loopback only, multicast scouting off: listening on `listen` (a port)
+/// and connecting to `connect`.
+pub fn loopback_json5(listen: Option<u16>, connect: Option<u16>) -> String {
+    let listen = listen.map_or("tcp/127.0.0.1:0".to_string(), |p| format!("tcp/127.0.0.1:{p}"));
+    let connect = connect.map_or(String::new(), |p| format!("\"tcp/127.0.0.1:{p}\""));
+    format!(
+        r#"{{ mode: "peer", listen: {{ endpoints: ["{listen}"] }}, connect: {{ endpoints: [{connect}] }}, scouting: {{ multicast: {{ enabled: false }} }} }}"#
+    )
+}
+
+/// The whole loop on one machine: the mock VINS and the mapper as two Zenoh peers on
+/// loopback, for `duration`; the map is saved where `config.map.snapshot_path` says.
+pub async fn demo(config: &Config, duration: Duration, vins_rate_hz: f64) -> Result<RunSummary> {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
+    let dir = std::env::temp_dir().join(format!("polymap-demo-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let write = |name: &str, text: String| -> Result<std::path::PathBuf> {
+        let path = dir.join(name);
+        std::fs::write(&path, text)?;
+        Ok(path)
+    };
+    let mut mapper = config.clone();
+    mapper.zenoh.config_file = write("mapper.json5", loopback_json5(Some(port), None))?;
+    let mut vins = config.zenoh.clone();
+    vins.config_file = write("vins.json5", loopback_json5(None, Some(port)))?;
+    let seq = Sequence::open(&config.sources.depth.sequence)?;
+    let opts = crate::mock_vins::MockVinsOptions {
+        rate_hz: vins_rate_hz,
+        drift_mm_per_s: 0.0,
+        duration: Some(duration + Duration::from_secs(1)),
+    };
+    let (summary, sent) = tokio::join!(run(&mapper, Some(duration)), crate::mock_vins::run(&seq, &vins, opts));
+    let _ = std::fs::remove_dir_all(&dir);
+    tracing::info!("mock VINS published {} poses", sent?);
+    summary
 }

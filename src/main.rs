@@ -138,6 +138,25 @@ enum Command {
         #[arg(long)]
         duration: Option<f64>,
     },
+    /// The whole loop on one machine: mock camera + mock VINS + mapper over Zenoh on
+    /// loopback, printing live status; then the final map and its picture
+    Demo {
+        /// Seconds to run
+        #[arg(long, default_value_t = 10.0)]
+        duration: f64,
+        /// Settings (default: the built-in defaults: the bundled mock stairs)
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Where the final map goes
+        #[arg(long, default_value = "out/map.json")]
+        out: PathBuf,
+        /// Where its top-down picture goes
+        #[arg(long, default_value = "out/map.png")]
+        render: PathBuf,
+        /// Mock VINS poses per second
+        #[arg(long, default_value_t = 100.0)]
+        vins_rate: f64,
+    },
     /// Publish a sequence's poses as VINS would: nav_msgs/Odometry (ROS 2 CDR) over Zenoh
     /// on the config's pose key, the sequence looped on the wall clock
     MockVins {
@@ -289,10 +308,43 @@ fn run(cli: Cli) -> Result<()> {
             }
             let runtime = tokio::runtime::Runtime::new()?;
             let s = runtime.block_on(polymap::live::run(&config, duration.map(std::time::Duration::from_secs_f64)))?;
-            tracing::info!(
-                "stopped: {} frames in, {} processed, {} dropped, {} without pose; map of {} polygons saved",
-                s.frames_in, s.processed, s.dropped, s.without_pose, s.map_polygons
+            println!(
+                "{} frames in, {} processed, {} dropped, {} without pose; frame-to-published latency median {:.1} ms, p99 {:.1} ms; map of {} polygons",
+                s.frames_in, s.processed, s.dropped, s.without_pose, s.latency.median, s.latency.p99, s.map_polygons
             );
+        }
+        Command::Demo { duration, config, out, render, vins_rate } => {
+            let mut config = load_config(config, None)?;
+            if !(duration.is_finite() && duration > 0.0) {
+                bail!("--duration must be a positive number of seconds");
+            }
+            config.map.snapshot_path = out.clone();
+            let runtime = tokio::runtime::Runtime::new()?;
+            let s = runtime.block_on(polymap::live::demo(
+                &config,
+                std::time::Duration::from_secs_f64(duration),
+                vins_rate,
+            ))?;
+            println!(
+                "{} frames in, {} processed, {} dropped, {} without pose; frame-to-published latency median {:.1} ms, p99 {:.1} ms; map of {} polygons in {}",
+                s.frames_in,
+                s.processed,
+                s.dropped,
+                s.without_pose,
+                s.latency.median,
+                s.latency.p99,
+                s.map_polygons,
+                out.display()
+            );
+            let map: polymap::map::MapSnapshot = serde_json::from_str(&std::fs::read_to_string(&out)?)?;
+            let seq = Sequence::open(&config.sources.depth.sequence)?;
+            if let Some(dir) = render.parent() {
+                std::fs::create_dir_all(dir)?;
+            }
+            polymap::map::render::top_down(&map, seq.truth.as_ref())
+                .save(&render)
+                .with_context(|| format!("writing {}", render.display()))?;
+            println!("picture in {}", render.display());
         }
         Command::MockVins { seq, rate, drift, duration, config } => {
             let config = load_config(config, None)?;

@@ -1,7 +1,8 @@
 //! Time-indexed odometry poses: each depth frame gets the pose at its own stamp, linearly
 //! interpolated in position and slerped in rotation between the two poses around it.
-//! A frame before the first pose, after the last, or in a gap wider than `max_gap` gets no
-//! pose: it is never mapped with a stale or extrapolated one.
+//! A frame before the first pose, after the last, in a gap wider than `max_gap`, or across a
+//! jump of the odometry gets no pose: it is never mapped with a stale, extrapolated or
+//! blended one.
 //!
 //! Poses come from outside (VINS over Zenoh), so each one is checked on the way in: a bad
 //! one is refused with what was wrong, counted, and leaves the buffer as it was.
@@ -43,7 +44,14 @@ pub enum NoPose {
     NotYet { stamp_ns: StampNs, last_ns: StampNs },
     #[error("frame at {stamp_ns} ns falls in a {gap_ms:.1} ms gap between poses (at most {max_ms:.1} ms)")]
     Gap { stamp_ns: StampNs, gap_ms: f64, max_ms: f64 },
+    #[error("frame at {stamp_ns} ns falls in a jump of the odometry ({speed:.1} m/s or {turn:.1} rad/s)")]
+    Jump { stamp_ns: StampNs, speed: f64, turn: f64 },
 }
+
+/// Faster than this between two poses is a jump (a relocalisation, a reset, a replayed
+/// sequence starting over), not motion: nothing is interpolated across it.
+pub const MAX_SPEED_M_S: f64 = 5.0;
+pub const MAX_TURN_RAD_S: f64 = 10.0;
 
 /// Running totals of what came in.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
@@ -138,6 +146,12 @@ impl PoseBuffer {
         let gap = b.stamp_ns - a.stamp_ns;
         if gap > self.max_gap_ns {
             return Err(NoPose::Gap { stamp_ns, gap_ms: gap as f64 * 1e-6, max_ms: self.max_gap_ns as f64 * 1e-6 });
+        }
+        let dt = gap as f64 * 1e-9;
+        let speed = (b.transform.translation.vector - a.transform.translation.vector).norm() / dt;
+        let turn = a.transform.rotation.angle_to(&b.transform.rotation) / dt;
+        if speed > MAX_SPEED_M_S || turn > MAX_TURN_RAD_S {
+            return Err(NoPose::Jump { stamp_ns, speed, turn });
         }
         let t = (stamp_ns - a.stamp_ns) as f64 / gap as f64;
         let p = a.transform.translation.vector.lerp(&b.transform.translation.vector, t);

@@ -141,9 +141,30 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
     let (scores, _) = polymap::eval::map::score_map(&snap, &seq, false).unwrap();
     let summary = polymap::eval::map::summarise(&scores, &snap, &seq);
     eprintln!("live map against the truth: {summary:?}");
+    for s in &scores {
+        eprintln!(
+            "step {} IOU {:.3} over {:.4} under {:.4} polygon {:?}",
+            s.step, s.iou, s.over_m2, s.under_m2, s.polygon
+        );
+    }
     assert!(summary.treads_seen >= 5 && summary.treads_found == summary.treads_seen, "{summary:?}");
     assert!(summary.iou_mean >= 0.85, "{summary:?}");
     assert!(summary.height_error_max_mm <= 10.0, "{summary:?}");
+
+    // Nothing is mapped where nothing is: every sizeable horizontal polygon lies over a true
+    // surface at its height (a pose blended across the sequence's loop would put a ghost
+    // floor up in the air).
+    let truth = seq.truth.as_ref().unwrap();
+    for p in snap.polygons.iter().filter(|p| p.label.is_horizontal() && p.area > 0.05) {
+        let [x, y, z] = p.centroid;
+        let under = truth.polygons.iter().any(|t| {
+            let (xs, ys) = (t.boundary.iter().map(|v| v[0]), t.boundary.iter().map(|v| v[1]));
+            let (x0, x1) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+            let (y0, y1) = ys.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+            (t.height - z).abs() < 0.05 && (x0..=x1).contains(&x) && (y0..=y1).contains(&y)
+        });
+        assert!(under, "map polygon {} at ({x:.2}, {y:.2}, {z:.2}) is over no true surface", p.id);
+    }
 
     // A foothold at the middle of tread 2 (x 0.28..0.56, z 0.30) is a piece of that tread.
     let tread2 = scores.iter().find(|s| s.step == 2).and_then(|s| s.polygon).expect("tread 2 mapped");

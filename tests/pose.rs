@@ -38,6 +38,10 @@ fn no_pose_before_after_or_in_a_gap() {
     assert!(gap.to_string().contains("250.0 ms gap"), "{gap}");
     assert!(buf.at(1025 * MS).is_ok());
     assert_eq!(buf.counters.missing, 4);
+    // The odometry jumps 2 m in 10 ms (a relocalisation): nothing in between is blended.
+    buf.push(&yaw(1310, 2.2, 0.0)).unwrap();
+    let jump = buf.at(1305 * MS).unwrap_err();
+    assert!(matches!(jump, NoPose::Jump { .. }), "{jump}");
 }
 
 #[test]

@@ -163,7 +163,7 @@ pub struct PolygonMap {
 const MIN_CLEAR_SAMPLES: usize = 8;
 /// Samples a polygon gets for clearing (spread on a grid over its shape).
 const CLEAR_SAMPLES: f64 = 48.0;
-/// Something nearer than the surface by more than this is an occluder, not in its place, m.
+/// Something over a surface's footprint nearer to it than this stands in its place, m.
 const OCCLUDER_M: f64 = 0.3;
 
 impl PolygonMap {
@@ -687,12 +687,24 @@ fn contradiction(
         let tol = cfg.clear_tolerance_m + 0.01 * p.z;
         if (measured - p.z).abs() <= tol {
             support += 1;
-        } else if measured > p.z - OCCLUDER_M {
-            // Seen through (farther), or something else standing where it was (a little nearer).
+        } else if measured > p.z || stands_on(e, t_world_camera, &(p * (measured / p.z))) {
+            // Seen through it, or something else stands in its place.
             against += 1;
         }
+        // Else something nearer hides it (the next step's nosing, a leg): that says nothing.
     }
     (support + against >= MIN_CLEAR_SAMPLES).then_some(against * 2 > support + against)
+}
+
+/// Whether a measured point (camera frame) stands on entry `e`: over its footprint, on the
+/// camera's side of its plane, less than `OCCLUDER_M` from it. A foot on a tread or a box
+/// on the floor does; the next step's riser hiding part of a tread does not.
+fn stands_on(e: &Entry, t_world_camera: &Isometry3<f64>, measured: &Point3<f64>) -> bool {
+    let w = t_world_camera * measured;
+    let camera = t_world_camera.translation.vector;
+    let side = |q: &Vector3<f64>| e.plane.normal.dot(q) + e.plane.offset;
+    let height = side(&w.coords) * side(&camera).signum();
+    height > 0.0 && height < OCCLUDER_M && e.shape.contains(&Point(e.frame.to_2d(&[w.x, w.y, w.z])))
 }
 
 /// The planner's view of an entry.
