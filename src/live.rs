@@ -445,13 +445,13 @@ pub async fn demo(config: &Config, duration: Duration, vins_rate_hz: f64) -> Res
     let mut vins = config.zenoh.clone();
     vins.config_file = write("vins.json5", loopback_json5(None, Some(port)))?;
     let seq = Sequence::open(&config.sources.depth.sequence)?;
-    let opts = crate::mock_vins::MockVinsOptions {
-        rate_hz: vins_rate_hz,
-        drift_mm_per_s: 0.0,
-        duration: Some(duration + Duration::from_secs(1)),
-    };
-    let (summary, sent) = tokio::join!(run(&mapper, Some(duration)), crate::mock_vins::run(&seq, &vins, opts));
+    let opts = crate::mock_vins::MockVinsOptions { rate_hz: vins_rate_hz, drift_mm_per_s: 0.0, duration: None };
+    let vins_task = tokio::spawn(async move { crate::mock_vins::run(&seq, &vins, opts).await });
+    let summary = run(&mapper, Some(duration)).await;
+    vins_task.abort();
+    if let Ok(Err(e)) = vins_task.await {
+        tracing::error!("mock VINS: {e}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
-    tracing::info!("mock VINS published {} poses", sent?);
     summary
 }
