@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs polymap's whole test suite on a fresh Debian/Ubuntu machine with Rust.
 # Installs what the tests need first: Mesa's software Vulkan (lavapipe) so the wgpu
-# pipeline runs where there is no GPU.
+# pipeline runs where there is no GPU, and a Python virtualenv for the Python client test.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -14,7 +14,18 @@ need_debs() {
     $sudo apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 }
-need_debs mesa-vulkan-drivers libvulkan1
+need_debs mesa-vulkan-drivers libvulkan1 python3-venv
+
+# The Python client test: eclipse-zenoh and rosbags from PyPI in a virtualenv of our own.
+venv=target/pyenv
+if ! "$venv/bin/python" -c "import zenoh, rosbags" >/dev/null 2>&1; then
+    echo "making $venv (eclipse-zenoh, rosbags)"
+    # Debian's own python (python3-venv above), not whatever python3 is first on PATH.
+    py=/usr/bin/python3; [ -x "$py" ] || py=python3
+    "$py" -m venv "$venv"
+    "$venv/bin/pip" install -q --disable-pip-version-check eclipse-zenoh==1.10.2 rosbags==0.11.9
+fi
+export POLYMAP_PYTHON="$PWD/$venv/bin/python"
 
 # All targets: library, binary, integration tests, examples, and each benchmark run once.
 cargo test --locked --all-targets

@@ -3,7 +3,7 @@
 //! ```text
 //! depth source (tokio task) ─► latest-frame slot ─► extractor thread (GPU/CPU work, pose
 //!   lookup, map update) ─► bounded channel ─► publisher task (Zenoh)
-//! Zenoh pose subscriber ─► pose buffer            queryables: map, foothold   status: 1 Hz
+//! Zenoh pose subscriber ─► pose buffer    queryables: map, foothold    status: 1 Hz    markers
 //! ```
 //! When extraction falls behind, the newest frame wins: a frame still waiting when the
 //! next arrives is dropped and counted. A frame with no odometry pose within the gap is
@@ -82,6 +82,7 @@ pub struct Keys {
     pub map: String,
     pub foothold: String,
     pub status: String,
+    pub markers: String,
 }
 
 impl Keys {
@@ -93,6 +94,7 @@ impl Keys {
             map: format!("{p}/map"),
             foothold: format!("{p}/foothold"),
             status: format!("{p}/status"),
+            markers: format!("{p}/markers"),
         }
     }
 }
@@ -266,6 +268,7 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
             Some(out) = out_rx.recv() => {
                 session.put(keys.frame_polygons.clone(), ros::encode(&out.frame)).await.map_err(|e| anyhow!("publishing: {e}"))?;
                 session.put(keys.map_updates.clone(), ros::encode(&out.update)).await.map_err(|e| anyhow!("publishing: {e}"))?;
+                session.put(keys.markers.clone(), ros::encode(&ros::markers(&out.update))).await.map_err(|e| anyhow!("publishing: {e}"))?;
                 latencies.push(now_ns().saturating_sub(out.stamp_ns) as f64 * 1e-6);
             }
             _ = status_tick.tick() => {
@@ -419,6 +422,11 @@ fn distance_xy(ring: &[[f64; 3]], q: [f64; 2]) -> f64 {
     if inside { 0.0 } else { nearest }
 }
 
+/// A TCP port on 127.0.0.1 that nothing listens on now.
+pub fn free_loopback_port() -> std::io::Result<u16> {
+    Ok(std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
+}
+
 /// A Zenoh peer on loopback only, multicast scouting off: listening on `listen` (a port)
 /// and connecting to `connect`.
 pub fn loopback_json5(listen: Option<u16>, connect: Option<u16>) -> String {
@@ -432,7 +440,7 @@ pub fn loopback_json5(listen: Option<u16>, connect: Option<u16>) -> String {
 /// The whole loop on one machine: the mock VINS and the mapper as two Zenoh peers on
 /// loopback, for `duration`; the map is saved where `config.map.snapshot_path` says.
 pub async fn demo(config: &Config, duration: Duration, vins_rate_hz: f64) -> Result<RunSummary> {
-    let port = std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
+    let port = free_loopback_port()?;
     let dir = std::env::temp_dir().join(format!("polymap-demo-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let write = |name: &str, text: String| -> Result<std::path::PathBuf> {

@@ -278,3 +278,127 @@ impl PolygonMsg {
         }
     }
 }
+
+// visualization_msgs/MarkerArray (ROS 2 Humble and later), so RViz shows the map.
+
+/// std_msgs/ColorRGBA
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ColorRgba {
+    pub r: f32,
+    pub g: f32,
+    pub b: f32,
+    pub a: f32,
+}
+
+/// builtin_interfaces/Duration
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct DurationMsg {
+    pub sec: i32,
+    pub nanosec: u32,
+}
+
+/// sensor_msgs/CompressedImage
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CompressedImage {
+    pub header: Header,
+    pub format: String,
+    pub data: Vec<u8>,
+}
+
+/// visualization_msgs/UVCoordinate
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct UvCoordinate {
+    pub u: f32,
+    pub v: f32,
+}
+
+/// visualization_msgs/MeshFile
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MeshFile {
+    pub filename: String,
+    pub data: Vec<u8>,
+}
+
+/// visualization_msgs/Marker
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Marker {
+    pub header: Header,
+    pub ns: String,
+    pub id: i32,
+    pub r#type: i32,
+    pub action: i32,
+    pub pose: PoseMsg,
+    pub scale: Point,
+    pub color: ColorRgba,
+    pub lifetime: DurationMsg,
+    pub frame_locked: bool,
+    pub points: Vec<Point>,
+    pub colors: Vec<ColorRgba>,
+    pub texture_resource: String,
+    pub texture: CompressedImage,
+    pub uv_coordinates: Vec<UvCoordinate>,
+    pub text: String,
+    pub mesh_resource: String,
+    pub mesh_file: MeshFile,
+    pub mesh_use_embedded_materials: bool,
+}
+
+/// visualization_msgs/MarkerArray
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MarkerArray {
+    pub markers: Vec<Marker>,
+}
+
+pub const MARKER_LINE_STRIP: i32 = 4;
+pub const MARKER_ADD: i32 = 0;
+pub const MARKER_DELETE: i32 = 2;
+
+impl Marker {
+    fn new(header: &Header, id: u64, action: i32) -> Marker {
+        Marker {
+            header: header.clone(),
+            ns: "polymap".into(),
+            // RViz ids are int32; map ids count up from 1 and stay far below 2^31.
+            id: (id & 0x7fff_ffff) as i32,
+            r#type: MARKER_LINE_STRIP,
+            action,
+            pose: PoseMsg { position: Point::default(), orientation: Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 } },
+            scale: Point { x: 0.01, y: 0.0, z: 0.0 },
+            color: ColorRgba::default(),
+            lifetime: DurationMsg::default(),
+            frame_locked: false,
+            points: Vec::new(),
+            colors: Vec::new(),
+            texture_resource: String::new(),
+            texture: CompressedImage::default(),
+            uv_coordinates: Vec::new(),
+            text: String::new(),
+            mesh_resource: String::new(),
+            mesh_file: MeshFile::default(),
+            mesh_use_embedded_materials: false,
+        }
+    }
+}
+
+/// Markers for a map update: each added or changed polygon's outline as a closed line strip
+/// coloured by label (the top-down picture's colours), and a delete for each removed one.
+pub fn markers(update: &MapUpdateMsg) -> MarkerArray {
+    let mut markers: Vec<Marker> = update
+        .added
+        .iter()
+        .chain(&update.changed)
+        .map(|p| {
+            let mut m = Marker::new(&update.header, p.id, MARKER_ADD);
+            let label = serde_json::from_value(serde_json::Value::String(p.label.clone())).ok();
+            let [r, g, b] = label
+                .map(|l| crate::map::render::label_colour(l, (p.step >= 0).then_some(p.step as u32)).0)
+                .unwrap_or([200, 200, 200]);
+            m.color = ColorRgba { r: r as f32 / 255.0, g: g as f32 / 255.0, b: b as f32 / 255.0, a: 1.0 };
+            m.points = p.boundary.clone();
+            m.points.extend(p.boundary.first().copied());
+            m
+        })
+        .collect();
+    markers.extend(update.removed.iter().map(|&id| Marker::new(&update.header, id, MARKER_DELETE)));
+    MarkerArray { markers }
+}

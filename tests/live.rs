@@ -11,22 +11,9 @@ use polymap::map::{Label, MapPolygon, MapSnapshot};
 use polymap::ros::{self, FootholdMsg, FramePolygonsMsg, MapMsg, MapUpdateMsg, PolygonMsg};
 use polymap::sequence::Sequence;
 
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
-
 fn json5(dir: &Path, name: &str, listen: Option<u16>, connect: Option<u16>) -> String {
-    let listen = listen.map_or("tcp/127.0.0.1:0".to_string(), |p| format!("tcp/127.0.0.1:{p}"));
-    let connect = connect.map_or(String::new(), |p| format!("\"tcp/127.0.0.1:{p}\""));
     let path = dir.join(format!("{name}.json5"));
-    std::fs::write(
-        &path,
-        format!(
-            r#"{{ mode: "peer", listen: {{ endpoints: ["{listen}"] }}, connect: {{ endpoints: [{connect}] }},
-                scouting: {{ multicast: {{ enabled: false }}, gossip: {{ enabled: false }} }} }}"#
-        ),
-    )
-    .unwrap();
+    std::fs::write(&path, polymap::live::loopback_json5(listen, connect)).unwrap();
     path.display().to_string()
 }
 
@@ -60,7 +47,7 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
     let dir = tempfile::tempdir().unwrap();
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let seq_dir = root.join("mock_frames/straight_320");
-    let port = free_port();
+    let port = polymap::live::free_loopback_port().unwrap();
     let snapshot = dir.path().join("map.json");
     let mapper_cfg = dir.path().join("mapper.toml");
     std::fs::write(
@@ -129,7 +116,28 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
         .await
         .unwrap();
 
+    let markers = Arc::new(AtomicU64::new(0));
+    let mk = markers.clone();
+    let _markers_sub = session
+        .declare_subscriber("polymap/leju/markers")
+        .callback(move |s| {
+            let m: ros::MarkerArray = ros::decode(&s.payload().to_bytes()).expect("markers decode");
+            for marker in &m.markers {
+                assert_eq!(marker.ns, "polymap");
+                if marker.action == ros::MARKER_ADD {
+                    assert!(
+                        marker.points.len() >= 4 && marker.points.first() == marker.points.last(),
+                        "a closed outline"
+                    );
+                    mk.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        })
+        .await
+        .unwrap();
+
     tokio::time::sleep(Duration::from_secs(5)).await;
+    assert!(markers.load(Ordering::Relaxed) >= 10, "RViz markers arrive");
     assert!(frames.load(Ordering::Relaxed) >= 10, "frame polygons arrive: {}", frames.load(Ordering::Relaxed));
     assert!(updates.load(Ordering::Relaxed) >= 10, "map updates arrive");
 

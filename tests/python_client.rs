@@ -1,0 +1,76 @@
+//! A Python client (eclipse-zenoh from PyPI, rosbags for CDR) decodes the live map and a
+//! MarkerArray: the bytes polymap sends are what ROS 2 tools read.
+//!
+//! scripts/test.sh makes a virtualenv with both packages and points POLYMAP_PYTHON at it.
+//! Without it the test says so and passes only outside CI.
+
+use std::path::Path;
+use std::process::Command;
+
+fn python() -> Option<String> {
+    let python = std::env::var("POLYMAP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let ok = Command::new(&python).args(["-c", "import zenoh, rosbags"]).status().is_ok_and(|s| s.success());
+    ok.then_some(python)
+}
+
+#[test]
+fn python_client_decodes_the_map_and_markers() {
+    let Some(python) = python() else {
+        assert!(std::env::var("CI").is_err(), "CI needs eclipse-zenoh and rosbags: run scripts/test.sh");
+        eprintln!("skipped: no python with eclipse-zenoh and rosbags (scripts/test.sh makes one)");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let seq = root.join("mock_frames/straight_320");
+    let port = polymap::live::free_loopback_port().unwrap();
+    let zenoh_file = |name: &str, listen: Option<u16>, connect: Option<u16>| {
+        let path = dir.path().join(format!("{name}.json5"));
+        std::fs::write(&path, polymap::live::loopback_json5(listen, connect)).unwrap();
+        path.display().to_string()
+    };
+    let mapper_cfg = dir.path().join("mapper.toml");
+    std::fs::write(
+        &mapper_cfg,
+        format!(
+            "[sources.depth]\nsequence = {:?}\n[pipeline]\nbackend = \"cpu\"\n[zenoh]\nconfig_file = {:?}\n",
+            seq.display().to_string(),
+            zenoh_file("mapper", Some(port), None)
+        ),
+    )
+    .unwrap();
+    let vins_cfg = dir.path().join("vins.toml");
+    std::fs::write(&vins_cfg, format!("[zenoh]\nconfig_file = {:?}\n", zenoh_file("vins", None, Some(port)))).unwrap();
+    let bin = env!("CARGO_BIN_EXE_polymap");
+    let mut mapper = Command::new(bin)
+        .args(["run", "--duration", "25", "--config"])
+        .arg(&mapper_cfg)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut vins = Command::new(bin)
+        .args(["mock-vins", seq.to_str().unwrap(), "--rate", "100", "--duration", "25", "--config"])
+        .arg(&vins_cfg)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    let out = Command::new(&python)
+        .arg(root.join("examples/python/client.py"))
+        .args(["--connect", &format!("tcp/127.0.0.1:{port}"), "--timeout", "20"])
+        .output()
+        .unwrap();
+    let _ = (mapper.kill(), vins.kill());
+    let _ = (mapper.wait(), vins.wait());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "client failed: {stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    let polygons = v["map"]["polygons"].as_array().unwrap();
+    assert!(polygons.iter().filter(|p| p["label"] == "tread").count() >= 4, "{stdout}");
+    let tread = polygons.iter().find(|p| p["label"] == "tread").unwrap();
+    assert!(tread["vertices"].as_u64().unwrap() >= 4 && tread["convex_pieces"].as_u64().unwrap() >= 1);
+    assert!(tread["step"].as_i64().unwrap() >= 1);
+    assert_eq!(v["markers"]["ns"], "polymap");
+    assert_eq!(v["markers"]["type"], 4, "line strips");
+    assert_eq!(v["markers"]["frame_id"], "world");
+}
