@@ -263,6 +263,15 @@ pub struct ZenohConfig {
     pub pose_key: String,
     /// A frame between two poses further apart than this gets no pose and is skipped, s.
     pub pose_max_gap_s: f64,
+    /// How polymap's own messages are encoded: ROS 2 CDR, or JSON for debugging.
+    pub encoding: Encoding,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Encoding {
+    Cdr,
+    Json,
 }
 
 impl Default for ZenohConfig {
@@ -273,6 +282,7 @@ impl Default for ZenohConfig {
             robot: "leju".into(),
             pose_key: "vins_estimator/odometry".into(),
             pose_max_gap_s: 0.1,
+            encoding: Encoding::Cdr,
         }
     }
 }

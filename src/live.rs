@@ -108,6 +108,7 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
     let seq = Sequence::open(&source.sequence)?;
     let session = crate::bus::open_session(&config.zenoh).await?;
     let keys = Keys::new(config);
+    let encoding = config.zenoh.encoding;
     let gap_ns = (config.zenoh.pose_max_gap_s * 1e9) as u64;
     let poses = Arc::new(Mutex::new(PoseBuffer::new(4096, gap_ns)));
     let _pose_sub = crate::bus::subscribe_poses(&session, &config.zenoh.pose_key, poses.clone()).await?;
@@ -210,7 +211,7 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
             .declare_queryable(keys.map.clone())
             .callback(move |query| {
                 let snap = map.lock().expect("map lock").snapshot();
-                let reply = ros::encode(&map_msg(&snap));
+                let reply = ros::encode_as(&map_msg(&snap), encoding);
                 let key = query.key_expr().clone();
                 tokio::spawn(async move {
                     if let Err(e) = query.reply(key, reply).await {
@@ -232,7 +233,7 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
                 let answer = match (coord("x"), coord("y"), coord("z")) {
                     (Some(x), Some(y), Some(z)) => {
                         let snap = map.lock().expect("map lock").snapshot();
-                        Ok(ros::encode(&foothold(&snap, [x, y, z])))
+                        Ok(ros::encode_as(&foothold(&snap, [x, y, z]), encoding))
                     }
                     _ => Err(format!("{} needs finite x, y and z parameters, got {params:?}", key.as_str())),
                 };
@@ -266,9 +267,9 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
     loop {
         tokio::select! {
             Some(out) = out_rx.recv() => {
-                session.put(keys.frame_polygons.clone(), ros::encode(&out.frame)).await.map_err(|e| anyhow!("publishing: {e}"))?;
-                session.put(keys.map_updates.clone(), ros::encode(&out.update)).await.map_err(|e| anyhow!("publishing: {e}"))?;
-                session.put(keys.markers.clone(), ros::encode(&ros::markers(&out.update))).await.map_err(|e| anyhow!("publishing: {e}"))?;
+                session.put(keys.frame_polygons.clone(), ros::encode_as(&out.frame, encoding)).await.map_err(|e| anyhow!("publishing: {e}"))?;
+                session.put(keys.map_updates.clone(), ros::encode_as(&out.update, encoding)).await.map_err(|e| anyhow!("publishing: {e}"))?;
+                session.put(keys.markers.clone(), ros::encode_as(&ros::markers(&out.update), encoding)).await.map_err(|e| anyhow!("publishing: {e}"))?;
                 latencies.push(now_ns().saturating_sub(out.stamp_ns) as f64 * 1e-6);
             }
             _ = status_tick.tick() => {
@@ -280,7 +281,7 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
                     status.latency_median_ms, status.latency_p99_ms, status.poses_accepted, status.poses_refused,
                     status.drift_z * 1e3, status.map_polygons
                 );
-                session.put(keys.status.clone(), ros::encode(&status)).await.map_err(|e| anyhow!("publishing: {e}"))?;
+                session.put(keys.status.clone(), ros::encode_as(&status, encoding)).await.map_err(|e| anyhow!("publishing: {e}"))?;
             }
             _ = snapshot_tick.tick(), if started.elapsed() > Duration::from_millis(500) => {
                 let mut m = map.lock().expect("map lock");

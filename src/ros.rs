@@ -103,6 +103,14 @@ pub fn encode<T: Serialize>(msg: &T) -> Vec<u8> {
     cdr::serialize::<_, _, cdr::CdrLe>(msg, cdr::Infinite).expect("plain message types always serialise")
 }
 
+/// A message in the configured encoding: CDR, or JSON for debugging.
+pub fn encode_as<T: Serialize>(msg: &T, encoding: crate::config::Encoding) -> Vec<u8> {
+    match encoding {
+        crate::config::Encoding::Cdr => encode(msg),
+        crate::config::Encoding::Json => serde_json::to_vec(msg).expect("plain message types always serialise"),
+    }
+}
+
 /// A message from CDR bytes, with a bounded size.
 pub fn decode<T: for<'de> Deserialize<'de>>(bytes: &[u8]) -> Result<T, String> {
     cdr::deserialize_from(bytes, cdr::Bounded(MAX_MESSAGE_BYTES)).map_err(|e| e.to_string())

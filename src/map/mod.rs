@@ -163,6 +163,8 @@ pub struct PolygonMap {
 const MIN_CLEAR_SAMPLES: usize = 8;
 /// Samples a polygon gets for clearing (spread on a grid over its shape).
 const CLEAR_SAMPLES: f64 = 48.0;
+/// Samples seen at a grazing angle (ray within ~9 deg of the plane) are not judged.
+const MIN_VIEW_COS: f64 = 0.15;
 /// Something over a surface's footprint nearer to it than this stands in its place, m.
 const OCCLUDER_M: f64 = 0.3;
 
@@ -297,6 +299,10 @@ impl PolygonMap {
                 })
                 .collect();
             for id in cleared {
+                tracing::debug!(
+                    "map polygon {id} cleared: contradicted {} frames in a row",
+                    self.cfg.clear_after_frames
+                );
                 self.entries.remove(&id);
                 update.removed.push(id);
                 self.counters.cleared += 1;
@@ -667,11 +673,22 @@ fn contradiction(
     intrinsics: &Intrinsics,
     cfg: &MapConfig,
 ) -> Option<bool> {
+    // Only a surface's seen side can be judged: a tread from below, or any plane seen
+    // edge-on, says nothing.
+    let camera = t_world_camera.translation.vector;
+    if e.plane.normal.dot(&camera) + e.plane.offset <= 0.0 {
+        return None;
+    }
     let camera_world = t_world_camera.inverse();
     let (w, h) = (depth_m.width, depth_m.height);
     let (mut support, mut against) = (0usize, 0usize);
     for c in &e.samples {
-        let p = camera_world * Point3::from(e.frame.lift(*c, &e.plane));
+        let world = Vector3::from(e.frame.lift(*c, &e.plane));
+        let ray = world - camera;
+        if e.plane.normal.dot(&ray).abs() < MIN_VIEW_COS * ray.norm() {
+            continue;
+        }
+        let p = camera_world * Point3::from(world);
         if p.z < 0.1 {
             continue;
         }
@@ -701,9 +718,8 @@ fn contradiction(
 /// on the floor does; the next step's riser hiding part of a tread does not.
 fn stands_on(e: &Entry, t_world_camera: &Isometry3<f64>, measured: &Point3<f64>) -> bool {
     let w = t_world_camera * measured;
-    let camera = t_world_camera.translation.vector;
-    let side = |q: &Vector3<f64>| e.plane.normal.dot(q) + e.plane.offset;
-    let height = side(&w.coords) * side(&camera).signum();
+    // The camera is on the plane's positive side (checked before).
+    let height = e.plane.normal.dot(&w.coords) + e.plane.offset;
     height > 0.0 && height < OCCLUDER_M && e.shape.contains(&Point(e.frame.to_2d(&[w.x, w.y, w.z])))
 }
 
