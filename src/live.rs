@@ -17,7 +17,7 @@ use anyhow::{Context, Result, anyhow, bail};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
 use crate::config::{Config, DepthSourceKind};
-use crate::extract::{Extractor, depth_metres};
+use crate::extract::Extractor;
 use crate::map::{MapSnapshot, PolygonMap};
 use crate::mock_vins::{SequenceClock, now_ns};
 use crate::pose::{NoPose, PoseBuffer};
@@ -85,6 +85,22 @@ pub struct Keys {
     pub markers: String,
 }
 
+impl std::fmt::Display for RunSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} frames in, {} processed, {} dropped, {} without pose; frame-to-published latency median {:.1} ms, p99 {:.1} ms; map of {} polygons",
+            self.frames_in,
+            self.processed,
+            self.dropped,
+            self.without_pose,
+            self.latency.median,
+            self.latency.p99,
+            self.map_polygons
+        )
+    }
+}
+
 impl Keys {
     pub fn new(config: &Config) -> Keys {
         let p = format!("{}/{}", config.zenoh.key_prefix, config.zenoh.robot);
@@ -129,7 +145,7 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
             let mut extractor = Extractor::new(&config.pipeline)?;
             while !stop.load(Ordering::Relaxed) {
                 let Some(frame) = slot.take(Duration::from_millis(100)) else { continue };
-                let (polys, _, _) = match extractor.extract(&frame, &intrinsics) {
+                let (polys, stages, _) = match extractor.extract(&frame, &intrinsics) {
                     Ok(r) => r,
                     Err(e) => {
                         tracing::warn!("frame at {} ns: {e}", frame.stamp_ns);
@@ -141,9 +157,8 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
                     continue;
                 };
                 let t_world_camera = world_body * body_camera;
-                let depth = depth_metres(&frame, &intrinsics)?;
                 let mut m = map.lock().expect("map lock");
-                let update = m.update(&polys.polygons, &t_world_camera, &intrinsics, Some(&depth));
+                let update = m.update(&polys.polygons, &t_world_camera, &intrinsics, Some(&stages.depth));
                 let header = Header { stamp: Time::from_ns(frame.stamp_ns), frame_id: "world".into() };
                 let corrected = m.corrected(&t_world_camera);
                 let frame_msg = FramePolygonsMsg {

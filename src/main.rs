@@ -303,39 +303,17 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Run { config, duration } => {
             let config = load_config(config, None)?;
-            if duration.is_some_and(|d| !(d.is_finite() && d > 0.0)) {
-                bail!("--duration must be a positive number of seconds");
-            }
+            let duration = duration.map(seconds).transpose()?;
             let runtime = tokio::runtime::Runtime::new()?;
-            let s = runtime.block_on(polymap::live::run(&config, duration.map(std::time::Duration::from_secs_f64)))?;
-            println!(
-                "{} frames in, {} processed, {} dropped, {} without pose; frame-to-published latency median {:.1} ms, p99 {:.1} ms; map of {} polygons",
-                s.frames_in, s.processed, s.dropped, s.without_pose, s.latency.median, s.latency.p99, s.map_polygons
-            );
+            println!("{}", runtime.block_on(polymap::live::run(&config, duration))?);
         }
         Command::Demo { duration, config, out, render, vins_rate } => {
             let mut config = load_config(config, None)?;
-            if !(duration.is_finite() && duration > 0.0) {
-                bail!("--duration must be a positive number of seconds");
-            }
+            let duration = seconds(duration)?;
             config.map.snapshot_path = out.clone();
             let runtime = tokio::runtime::Runtime::new()?;
-            let s = runtime.block_on(polymap::live::demo(
-                &config,
-                std::time::Duration::from_secs_f64(duration),
-                vins_rate,
-            ))?;
-            println!(
-                "{} frames in, {} processed, {} dropped, {} without pose; frame-to-published latency median {:.1} ms, p99 {:.1} ms; map of {} polygons in {}",
-                s.frames_in,
-                s.processed,
-                s.dropped,
-                s.without_pose,
-                s.latency.median,
-                s.latency.p99,
-                s.map_polygons,
-                out.display()
-            );
+            let s = runtime.block_on(polymap::live::demo(&config, duration, vins_rate))?;
+            println!("{s} in {}", out.display());
             let map: polymap::map::MapSnapshot = serde_json::from_str(&std::fs::read_to_string(&out)?)?;
             let seq = Sequence::open(&config.sources.depth.sequence)?;
             if let Some(dir) = render.parent() {
@@ -349,13 +327,10 @@ fn run(cli: Cli) -> Result<()> {
         Command::MockVins { seq, rate, drift, duration, config } => {
             let config = load_config(config, None)?;
             let s = Sequence::open(&seq)?;
-            if duration.is_some_and(|d| !(d.is_finite() && d > 0.0)) {
-                bail!("--duration must be a positive number of seconds");
-            }
             let opts = polymap::mock_vins::MockVinsOptions {
                 rate_hz: rate,
                 drift_mm_per_s: drift,
-                duration: duration.map(std::time::Duration::from_secs_f64),
+                duration: duration.map(seconds).transpose()?,
             };
             let runtime = tokio::runtime::Runtime::new()?;
             let sent = runtime.block_on(async {
@@ -372,6 +347,14 @@ fn run(cli: Cli) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// A `--duration` in seconds, refused unless positive and finite.
+fn seconds(s: f64) -> Result<std::time::Duration> {
+    if !(s.is_finite() && s > 0.0) {
+        bail!("--duration {s} must be a positive number of seconds");
+    }
+    Ok(std::time::Duration::from_secs_f64(s))
 }
 
 /// The config file's settings (or the defaults), with the backend overridden if asked.

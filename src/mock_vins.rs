@@ -62,11 +62,7 @@ pub async fn run(seq: &Sequence, zenoh_cfg: &ZenohConfig, opts: MockVinsOptions)
     let clock = SequenceClock::new(seq)?;
     let mut poses = PoseBuffer::new(seq.len(), u64::MAX);
     for p in &seq.poses {
-        let q = p.transform.rotation;
-        let t = p.transform.translation;
-        poses
-            .push(&RawPose { stamp_ns: p.stamp_ns, position: [t.x, t.y, t.z], quat_xyzw: [q.i, q.j, q.k, q.w] })
-            .map_err(|e| anyhow!("{}: {e}", seq.dir.display()))?;
+        poses.push(&RawPose::from(p)).map_err(|e| anyhow!("{}: {e}", seq.dir.display()))?;
     }
     let last_ns = seq.poses.last().map_or(0, |p| p.stamp_ns);
 
@@ -88,8 +84,8 @@ pub async fn run(seq: &Sequence, zenoh_cfg: &ZenohConfig, opts: MockVinsOptions)
         let tau = clock.sequence_time(t).min(last_ns);
         let pose: Isometry3<f64> = poses.at(tau).map_err(|e| anyhow!("sequence pose at {tau}: {e}"))?;
         let drift = opts.drift_mm_per_s * 1e-3 * (t - started) as f64 * 1e-9;
-        let (p, q) = (pose.translation.vector, pose.rotation);
-        let raw = RawPose { stamp_ns: t, position: [p.x, p.y, p.z + drift], quat_xyzw: [q.i, q.j, q.k, q.w] };
+        let mut raw = RawPose::from(&crate::types::Pose { stamp_ns: t, transform: pose });
+        raw.position[2] += drift;
         let bytes = ros::encode(&ros::odometry(&raw, "world", "camera"));
         publisher.put(bytes).await.map_err(|e| anyhow!("publishing a pose: {e}"))?;
         sent += 1;

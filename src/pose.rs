@@ -22,6 +22,13 @@ pub struct RawPose {
     pub quat_xyzw: [f64; 4],
 }
 
+impl From<&Pose> for RawPose {
+    fn from(p: &Pose) -> RawPose {
+        let (t, q) = (p.transform.translation, p.transform.rotation);
+        RawPose { stamp_ns: p.stamp_ns, position: [t.x, t.y, t.z], quat_xyzw: [q.i, q.j, q.k, q.w] }
+    }
+}
+
 /// Why a pose was refused.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum PoseRejected {

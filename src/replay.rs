@@ -18,9 +18,7 @@ pub fn initial_map(config: &Config) -> PolygonMap {
     if !m.load_at_start || m.snapshot_path.as_os_str().is_empty() || !m.snapshot_path.exists() {
         return PolygonMap::new(m);
     }
-    let loaded = persist::load(&m.snapshot_path, |s| PolygonMap::from_snapshot(m, s).map(|_| ()))
-        .map(|s| PolygonMap::from_snapshot(m, &s).expect("checked while loading"));
-    match loaded {
+    match persist::load(&m.snapshot_path, |s| PolygonMap::from_snapshot(m, s)) {
         Ok(map) => {
             tracing::info!("map loaded from {}: {} polygons", m.snapshot_path.display(), map.len());
             map
@@ -55,9 +53,6 @@ pub fn replay(
         let depth = seq.depth(k)?;
         let (frame, stages, _) = extractor.extract(&depth, &seq.intrinsics)?;
         let update = map.update(&frame.polygons, &seq.poses[k].transform, &seq.intrinsics, Some(&stages.depth));
-        for why in &update.rejected {
-            tracing::warn!("frame {k}: {why}");
-        }
         on_frame(k, &update);
         if last_save.elapsed() >= period {
             save_snapshot(map, config)?;

@@ -205,10 +205,7 @@ async fn mock_vins_publishes_the_sequence_poses() {
     let clock = polymap::mock_vins::SequenceClock::new(&seq).unwrap();
     let mut truth = PoseBuffer::new(seq.len(), u64::MAX);
     for p in &seq.poses {
-        let (t, q) = (p.transform.translation, p.transform.rotation);
-        truth
-            .push(&RawPose { stamp_ns: p.stamp_ns, position: [t.x, t.y, t.z], quat_xyzw: [q.i, q.j, q.k, q.w] })
-            .unwrap();
+        truth.push(&RawPose::from(p)).unwrap();
     }
     let last = seq.poses.last().unwrap().stamp_ns;
     let received = buffer.lock().unwrap();

@@ -224,7 +224,7 @@ fn snapshots_round_trip_and_corrupt_files_are_moved_aside() {
     let path = dir.path().join("map.json");
     let snap = map.snapshot();
     persist::save(&snap, &path).unwrap();
-    let loaded = persist::load(&path, |s| PolygonMap::from_snapshot(&cfg, s).map(|_| ())).unwrap();
+    let loaded = persist::load(&path, |s| PolygonMap::from_snapshot(&cfg, s).map(|_| s.clone())).unwrap();
     assert_eq!(loaded, snap);
     let mut reloaded = PolygonMap::from_snapshot(&cfg, &loaded).unwrap();
     let again = reloaded.snapshot();
@@ -233,7 +233,7 @@ fn snapshots_round_trip_and_corrupt_files_are_moved_aside() {
     assert_eq!(again.polygons[0].observations, 2);
 
     std::fs::write(&path, b"{\"frame\": \"world\", \"drift_z\": ").unwrap();
-    let err = persist::load(&path, |_| Ok(())).unwrap_err().to_string();
+    let err = persist::load(&path, |s| Ok(s.clone())).unwrap_err().to_string();
     assert!(err.contains("corrupt") && err.contains("map.json"), "{err}");
     assert!(!path.exists(), "the corrupt file was moved, not left to be overwritten");
     let aside: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();

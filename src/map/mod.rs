@@ -106,6 +106,8 @@ struct Entry {
     aabb: [[f64; 3]; 2],
     area: f64,
     centroid: [f64; 3],
+    /// Width of the smallest rectangle enclosing the shape, m (a tread's depth, for labels).
+    depth: f64,
     /// Points inside the shape that clearing checks against the depth image.
     samples: Vec<Coord<f64>>,
     /// The planner's view, built when asked for and dropped when the entry changes.
@@ -219,12 +221,20 @@ impl PolygonMap {
                 None => true,
             })
             .collect();
-        if !t_world_camera.translation.vector.iter().chain(t_world_camera.rotation.coords.iter()).all(|v| v.is_finite())
-        {
+        let pose_finite = t_world_camera
+            .translation
+            .vector
+            .iter()
+            .chain(t_world_camera.rotation.coords.iter())
+            .all(|v| v.is_finite());
+        if !pose_finite {
             update.rejected.push("pose is not finite: frame skipped".into());
         }
         self.counters.rejected += update.rejected.len() as u64;
-        if update.rejected.iter().any(|r| r.starts_with("pose")) {
+        for why in &update.rejected {
+            tracing::warn!("map: {why}");
+        }
+        if !pose_finite {
             return update;
         }
 
@@ -260,7 +270,9 @@ impl PolygonMap {
             matches.sort_by(|a, b| b.area.total_cmp(&a.area));
             let id = match matches.first() {
                 None => {
-                    let id = self.insert(&o);
+                    let id = self.next_id;
+                    self.next_id += 1;
+                    self.insert(id, &o);
                     update.added.push(id);
                     id
                 }
@@ -392,12 +404,12 @@ impl PolygonMap {
         out
     }
 
-    fn insert(&mut self, o: &Observation) -> u64 {
-        let id = self.next_id;
-        self.next_id += 1;
+    /// A new entry `id` made of one observation.
+    fn insert(&mut self, id: u64, o: &Observation) {
         let centre = o.moments.sum / o.moments.weight.max(1e-12);
         let frame = PlaneFrame::new(centre, o.plane.normal);
-        let shape = geometry::simplify_to(&frame.shape(&o.boundary, &o.holes), self.cfg.max_vertices);
+        let as_seen = frame.shape(&o.boundary, &o.holes);
+        let shape = geometry::simplify_to(&as_seen, self.cfg.max_vertices);
         let mut e = Entry {
             frame,
             shape,
@@ -410,15 +422,15 @@ impl PolygonMap {
             aabb: o.aabb,
             area: 0.0,
             centroid: [0.0; 3],
+            depth: 0.0,
             samples: Vec::new(),
             published: None,
             seen: o.shape_in(&frame),
             confirmed: None,
-            latest: Some(frame.shape(&o.boundary, &o.holes)),
+            latest: Some(as_seen),
         };
         refresh(&mut e);
         self.entries.insert(id, e);
-        id
     }
 
     /// Unions observation `o` into entry `id` and refits its plane.
@@ -437,12 +449,7 @@ impl PolygonMap {
             e.latest = Some(e.frame.shape(&o.boundary, &o.holes));
             e.shape = shown(e.confirmed.as_ref(), e.latest.as_ref(), max_vertices).unwrap_or(e.shape.clone());
         }
-        e.moments.add(&o.moments);
-        e.observations += 1;
-        if let Some(p) = e.moments.plane(&e.plane.normal) {
-            e.plane = p;
-        }
-        refresh(e);
+        refit(e, &o.moments, 1);
     }
 
     /// Entry `other` merged into `id` (one observation bridged them), then dropped.
@@ -456,12 +463,7 @@ impl PolygonMap {
         e.seen = union_into(e.seen.take(), theirs.clone(), max_vertices);
         e.confirmed = union_into(e.confirmed.take(), theirs, max_vertices);
         e.shape = shown(e.confirmed.as_ref(), e.latest.as_ref(), max_vertices).unwrap_or(e.shape.clone());
-        e.moments.add(&o.moments);
-        e.observations += o.observations;
-        if let Some(p) = e.moments.plane(&e.plane.normal) {
-            e.plane = p;
-        }
-        refresh(e);
+        refit(e, &o.moments, o.observations);
     }
 
     /// Labels every entry; returns the ids whose label or step changed.
@@ -473,7 +475,7 @@ impl PolygonMap {
                 tilt_deg: e.plane.normal.z.abs().clamp(0.0, 1.0).acos().to_degrees(),
                 height: e.centroid[2],
                 z_range: [e.aabb[0][2], e.aabb[1][2]],
-                depth: e.shape.minimum_rotated_rect().map_or(0.0, |r| min_side(&r)),
+                depth: e.depth,
                 xy: [e.centroid[0], e.centroid[1]],
             })
             .collect();
@@ -560,15 +562,13 @@ impl PolygonMap {
                 boundary: p.boundary.clone(),
                 holes: p.holes.clone(),
             };
-            map.next_id = p.id;
-            map.insert(&o);
+            map.insert(p.id, &o);
             let e = map.entries.get_mut(&p.id).expect("just inserted");
             e.observations = p.observations.max(1);
             e.confirmed = Some(e.shape.clone());
             e.seen = Some(e.shape.clone());
-            map.next_id = map.next_id.max(p.id + 1);
         }
-        map.next_id = s.polygons.iter().map(|p| p.id + 1).max().unwrap_or(1).max(map.next_id);
+        map.next_id = s.polygons.iter().map(|p| p.id + 1).max().unwrap_or(1);
         map.relabel();
         Ok(map)
     }
@@ -640,13 +640,24 @@ pub fn polygon_problem(p: &Polygon) -> Option<String> {
     None
 }
 
-/// Area, centroid, world box and clearing samples of an entry after its shape or plane changed.
+/// Adds observations' moments to an entry, refits its plane and refreshes what follows.
+fn refit(e: &mut Entry, moments: &Moments, observations: u32) {
+    e.moments.add(moments);
+    e.observations += observations;
+    if let Some(p) = e.moments.plane(&e.plane.normal) {
+        e.plane = p;
+    }
+    refresh(e);
+}
+
+/// Area, centroid, world box, depth and clearing samples of an entry after its shape or plane changed.
 fn refresh(e: &mut Entry) {
     e.published = None;
     e.area = e.shape.unsigned_area();
     let c = e.shape.centroid().map_or(Coord { x: 0.0, y: 0.0 }, |p| p.0);
     e.centroid = e.frame.lift(c, &e.plane);
     e.aabb = aabb(&e.frame.lift_ring(e.shape.exterior(), &e.plane));
+    e.depth = e.shape.minimum_rotated_rect().map_or(0.0, |r| min_side(&r));
     e.samples.clear();
     if let Some(r) = geo::BoundingRect::bounding_rect(&e.shape) {
         let step = (e.area / CLEAR_SAMPLES).sqrt().max(0.01);

@@ -36,13 +36,14 @@ pub enum LoadError {
     Corrupt { path: PathBuf, why: String, aside: PathBuf },
 }
 
-/// Reads a snapshot; a corrupt file is renamed to `<name>.corrupt-<unix seconds>` first.
-pub fn load(path: &Path, check: impl FnOnce(&MapSnapshot) -> Result<(), String>) -> Result<MapSnapshot, LoadError> {
+/// Reads a snapshot and makes `build` of it (a map, or the snapshot itself); a file that
+/// does not parse or that `build` refuses is renamed to `<name>.corrupt-<unix seconds>`.
+pub fn load<T>(path: &Path, build: impl FnOnce(&MapSnapshot) -> Result<T, String>) -> Result<T, LoadError> {
     let bytes = std::fs::read(path).map_err(|source| LoadError::Read { path: path.to_owned(), source })?;
     let parsed = serde_json::from_slice::<MapSnapshot>(&bytes).map_err(|e| e.to_string());
     let why = match parsed {
-        Ok(s) => match check(&s) {
-            Ok(()) => return Ok(s),
+        Ok(s) => match build(&s) {
+            Ok(built) => return Ok(built),
             Err(why) => why,
         },
         Err(why) => why,
