@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Runs polymap's whole test suite on a fresh Debian/Ubuntu machine with Rust.
 # Installs what the tests need first: Mesa's software Vulkan (lavapipe) so the wgpu
-# pipeline runs where there is no GPU, and a Python virtualenv for the Python client test.
+# pipeline runs where there is no GPU; a Python virtualenv for the Python client tests;
+# librealsense2 from the pyrealsense2 wheel, so the `realsense` feature builds, links and
+# plays bags here (scripts/librealsense.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -14,7 +16,7 @@ need_debs() {
     $sudo apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 }
-need_debs mesa-vulkan-drivers libvulkan1 python3-venv
+need_debs mesa-vulkan-drivers libvulkan1 python3-venv patchelf libusb-1.0-0 libpython3.11
 
 # The Python client test: eclipse-zenoh and rosbags from PyPI in a virtualenv of our own.
 venv=target/pyenv
@@ -27,5 +29,9 @@ if ! "$venv/bin/python" -c "import zenoh, rosbags" >/dev/null 2>&1; then
 fi
 export POLYMAP_PYTHON="$PWD/$venv/bin/python"
 
-# All targets: library, binary, integration tests, examples, and each benchmark run once.
-cargo test --locked --all-targets
+# librealsense2 for --features realsense: sets PKG_CONFIG_PATH and LD_LIBRARY_PATH.
+source scripts/librealsense.sh "$venv"
+
+# All targets (library, binary, integration tests, examples, each benchmark run once),
+# with the RealSense drivers compiled, linked and tested against recorded bags.
+cargo test --locked --all-targets --features realsense

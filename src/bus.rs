@@ -51,3 +51,34 @@ pub async fn subscribe_poses(
         .await
         .map_err(|e| anyhow!("subscribing to poses on {key}: {e}"))
 }
+
+/// Publishes the D435i's samples (real or mock, the same way) as realsense-ros does:
+/// `<prefix>/infra{1,2}/image_rect_raw` (sensor_msgs/Image, mono8),
+/// `<prefix>/infra{1,2}/camera_info` and `<prefix>/imu` (sensor_msgs/Imu, united), ROS 2 CDR.
+/// Returns how many samples went out once the sender side closes.
+pub async fn publish_d435i(
+    session: &zenoh::Session,
+    prefix: &str,
+    mut samples: tokio::sync::mpsc::Receiver<crate::camera::D435iSample>,
+) -> Result<u64> {
+    use crate::camera::D435iSample;
+    use crate::camera::mock_d435i::BASELINE_M;
+    use crate::ros;
+    let put = |key: String, bytes: Vec<u8>| async move {
+        session.put(&key, bytes).await.map_err(|e| anyhow!("publishing on {key}: {e}"))
+    };
+    let mut sent = 0;
+    while let Some(sample) = samples.recv().await {
+        match sample {
+            D435iSample::Infrared { index, stamp_ns, intrinsics, pixels } => {
+                let info = ros::ir_camera_info(stamp_ns, index, &intrinsics, BASELINE_M);
+                let image = ros::ir_image(stamp_ns, index, &intrinsics, pixels);
+                put(format!("{prefix}/infra{index}/camera_info"), ros::encode(&info)).await?;
+                put(format!("{prefix}/infra{index}/image_rect_raw"), ros::encode(&image)).await?;
+            }
+            D435iSample::Imu(s) => put(format!("{prefix}/imu"), ros::encode(&ros::imu(&s))).await?,
+        }
+        sent += 1;
+    }
+    Ok(sent)
+}

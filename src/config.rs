@@ -45,6 +45,8 @@ pub enum DepthSourceKind {
     Sequence,
     /// The L515 through librealsense (needs the `realsense` feature).
     Realsense,
+    /// A librealsense `.bag` recording (`bag` key), played once through the same driver.
+    Bag,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -55,10 +57,68 @@ pub struct DepthSourceConfig {
     pub sequence: PathBuf,
     /// L515 serial number; empty = the only L515 present.
     pub serial: String,
+    /// Recording for `kind = "bag"`.
+    pub bag: PathBuf,
     /// Depth profile, pixels and frames per second.
     pub width: u32,
     pub height: u32,
     pub fps: u32,
+    /// L515 options, named as realsense-ros names them; unset = the camera's own value.
+    pub options: L515Options,
+}
+
+/// The L515 options its users tune. Ranges are the L515's (librealsense 2.56).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct L515Options {
+    /// 0 custom, 1 default, 2 no ambient light, 3 low ambient light, 4 max range, 5 short range.
+    pub visual_preset: Option<f32>,
+    /// Laser power, 0..=100 %.
+    pub laser_power: Option<f32>,
+    /// Confidence threshold, 0..=3.
+    pub confidence_threshold: Option<f32>,
+    /// Pre-processing sharpening, 0..=5.
+    pub pre_processing_sharpening: Option<f32>,
+    /// Receiver gain (librealsense digital gain): 0 auto, 1 high, 2 low.
+    pub receiver_gain: Option<f32>,
+    /// Minimum distance, mm, 0..=2000 (nearer returns are dropped).
+    pub min_distance: Option<f32>,
+}
+
+impl L515Options {
+    /// The options that are set, in the order they are applied (the preset first: it
+    /// resets the others).
+    pub fn as_list(&self) -> Vec<(crate::camera::CamOption, f32)> {
+        use crate::camera::CamOption as O;
+        [
+            (O::VisualPreset, self.visual_preset),
+            (O::LaserPower, self.laser_power),
+            (O::ConfidenceThreshold, self.confidence_threshold),
+            (O::PreProcessingSharpening, self.pre_processing_sharpening),
+            (O::ReceiverGain, self.receiver_gain),
+            (O::MinDistance, self.min_distance),
+        ]
+        .into_iter()
+        .filter_map(|(o, v)| v.map(|v| (o, v)))
+        .collect()
+    }
+
+    fn validate(&self) -> Result<(), (&'static str, String)> {
+        let ranges = [
+            ("sources.depth.options.visual_preset", self.visual_preset, 0.0, 5.0),
+            ("sources.depth.options.laser_power", self.laser_power, 0.0, 100.0),
+            ("sources.depth.options.confidence_threshold", self.confidence_threshold, 0.0, 3.0),
+            ("sources.depth.options.pre_processing_sharpening", self.pre_processing_sharpening, 0.0, 5.0),
+            ("sources.depth.options.receiver_gain", self.receiver_gain, 0.0, 2.0),
+            ("sources.depth.options.min_distance", self.min_distance, 0.0, 2000.0),
+        ];
+        for (key, v, lo, hi) in ranges {
+            if let Some(v) = v {
+                check_range(key, v as f64, lo, hi)?;
+            }
+        }
+        Ok(())
+    }
 }
 
 impl Default for DepthSourceConfig {
@@ -67,9 +127,11 @@ impl Default for DepthSourceConfig {
             kind: DepthSourceKind::Mock,
             sequence: PathBuf::from("mock_frames/straight_320"),
             serial: String::new(),
+            bag: PathBuf::new(),
             width: 320,
             height: 240,
             fps: 30,
+            options: L515Options::default(),
         }
     }
 }
@@ -98,6 +160,9 @@ pub struct D435iConfig {
     /// IMU rates, Hz (D435i: gyro 200 or 400, accel 63 or 250).
     pub gyro_hz: u32,
     pub accel_hz: u32,
+    /// Zenoh keys of the IR images, camera infos and IMU: realsense-ros's topic names
+    /// (`/camera/camera/imu`) as zenoh-bridge-ros2dds maps them (`camera/camera/imu`).
+    pub key_prefix: String,
 }
 
 impl Default for D435iConfig {
@@ -110,6 +175,7 @@ impl Default for D435iConfig {
             ir_fps: 30,
             gyro_hz: 200,
             accel_hz: 250,
+            key_prefix: "camera/camera".into(),
         }
     }
 }
@@ -314,9 +380,14 @@ impl Config {
     /// The first impossible value, as (dotted key, reason).
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
         let d = &self.sources.depth;
-        if d.kind != DepthSourceKind::Realsense && d.sequence.as_os_str().is_empty() {
+        let needs_sequence = matches!(d.kind, DepthSourceKind::Mock | DepthSourceKind::Sequence);
+        if needs_sequence && d.sequence.as_os_str().is_empty() {
             return Err(("sources.depth.sequence", "a mock or sequence source needs a sequence directory".into()));
         }
+        if d.kind == DepthSourceKind::Bag && d.bag.as_os_str().is_empty() {
+            return Err(("sources.depth.bag", "kind = \"bag\" needs the path of a .bag recording".into()));
+        }
+        d.options.validate()?;
         check_range("sources.depth.width", d.width as f64, 16.0, 4096.0)?;
         check_range("sources.depth.height", d.height as f64, 16.0, 4096.0)?;
         check_range("sources.depth.fps", d.fps as f64, 1.0, 1000.0)?;
@@ -395,11 +466,19 @@ impl Config {
         let z = &self.zenoh;
         check_range("zenoh.pose_max_gap_s", z.pose_max_gap_s, 0.001, 10.0)?;
         for (key, v) in
-            [("zenoh.key_prefix", &z.key_prefix), ("zenoh.robot", &z.robot), ("zenoh.pose_key", &z.pose_key)]
+            [
+                ("zenoh.key_prefix", &z.key_prefix),
+                ("zenoh.robot", &z.robot),
+                ("sources.d435i.key_prefix", &self.sources.d435i.key_prefix),
+            ]
         {
             if v.is_empty() || v.contains(['*', '$', '?', '#']) || v.starts_with('/') || v.ends_with('/') {
                 return Err((key, format!("{v:?} must be a non-empty key without wildcards or leading/trailing '/'")));
             }
+        }
+        // The pose key is a key expression: rmw_zenoh's `0/vins_estimator/odometry/**` needs its wildcard.
+        if let Err(e) = zenoh::key_expr::KeyExpr::try_from(z.pose_key.as_str()) {
+            return Err(("zenoh.pose_key", format!("{:?} is not a Zenoh key expression: {e}", z.pose_key)));
         }
         Ok(())
     }

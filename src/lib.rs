@@ -7,6 +7,7 @@
 
 pub mod bench;
 pub mod bus;
+pub mod camera;
 pub mod config;
 pub mod eval;
 pub mod extract;

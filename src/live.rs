@@ -23,24 +23,24 @@ use crate::mock_vins::{SequenceClock, now_ns};
 use crate::pose::{NoPose, PoseBuffer};
 use crate::ros::{self, FootholdMsg, FramePolygonsMsg, Header, MapMsg, MapUpdateMsg, PolygonMsg, StatusMsg, Time};
 use crate::sequence::Sequence;
-use crate::types::DepthFrame;
+use crate::types::{DepthFrame, Intrinsics};
 
 /// The newest frame, waiting for the extractor; a newer one replaces it.
 struct Latest {
-    frame: Mutex<Option<DepthFrame>>,
+    frame: Mutex<Option<(DepthFrame, Intrinsics)>>,
     ready: Condvar,
 }
 
 impl Latest {
     /// Puts a frame in; true when it replaced one that was never taken.
-    fn put(&self, f: DepthFrame) -> bool {
+    fn put(&self, f: (DepthFrame, Intrinsics)) -> bool {
         let replaced = self.frame.lock().expect("slot lock").replace(f).is_some();
         self.ready.notify_one();
         replaced
     }
 
     /// The waiting frame, after at most `wait`.
-    fn take(&self, wait: Duration) -> Option<DepthFrame> {
+    fn take(&self, wait: Duration) -> Option<(DepthFrame, Intrinsics)> {
         let guard = self.frame.lock().expect("slot lock");
         let (mut guard, _) = self.ready.wait_timeout_while(guard, wait, |f| f.is_none()).expect("slot lock");
         guard.take()
@@ -118,10 +118,13 @@ impl Keys {
 /// Runs until SIGINT / SIGTERM or `duration`; saves the map at the end.
 pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSummary> {
     let source = &config.sources.depth;
-    if source.kind != DepthSourceKind::Mock {
-        bail!("sources.depth.kind = {:?}: only the mock camera runs live so far", source.kind);
-    }
-    let seq = Sequence::open(&source.sequence)?;
+    let seq = match source.kind {
+        DepthSourceKind::Mock => Some(Sequence::open(&source.sequence)?),
+        DepthSourceKind::Realsense | DepthSourceKind::Bag => None,
+        DepthSourceKind::Sequence => {
+            bail!("sources.depth.kind = \"sequence\" is for offline work (polymap replay); live needs mock, realsense or bag")
+        }
+    };
     let session = crate::bus::open_session(&config.zenoh).await?;
     let keys = Keys::new(config);
     let encoding = config.zenoh.encoding;
@@ -139,12 +142,11 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
         let (slot, stop, poses, map, counters) =
             (slot.clone(), stop.clone(), poses.clone(), map.clone(), counters.clone());
         let config = config.clone();
-        let intrinsics = seq.intrinsics;
         let body_camera = extrinsic(&config);
         std::thread::Builder::new().name("extractor".into()).spawn(move || -> Result<()> {
             let mut extractor = Extractor::new(&config.pipeline)?;
             while !stop.load(Ordering::Relaxed) {
-                let Some(frame) = slot.take(Duration::from_millis(100)) else { continue };
+                let Some((frame, intrinsics)) = slot.take(Duration::from_millis(100)) else { continue };
                 let (polys, stages, _) = match extractor.extract(&frame, &intrinsics) {
                     Ok(r) => r,
                     Err(e) => {
@@ -189,35 +191,11 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
         })?
     };
 
-    // The mock camera: the sequence looped on the wall clock, like the mock VINS.
-    let camera = {
-        let (slot, stop, counters) = (slot.clone(), stop.clone(), counters.clone());
-        let clock = SequenceClock::new(&seq)?;
-        let stamps: Vec<u64> = seq.poses.iter().map(|p| p.stamp_ns).collect();
-        let frames: Vec<DepthFrame> = (0..seq.len()).map(|k| seq.depth(k)).collect::<Result<_, _>>()?;
-        let fps = source.fps as f64;
-        tokio::spawn(async move {
-            let mut tick = tokio::time::interval(Duration::from_secs_f64(1.0 / fps));
-            let mut last_k = usize::MAX;
-            while !stop.load(Ordering::Relaxed) {
-                tick.tick().await;
-                let t = now_ns();
-                let tau = clock.sequence_time(t);
-                let k = stamps.partition_point(|&s| s <= tau).saturating_sub(1);
-                if k == last_k {
-                    continue;
-                }
-                last_k = k;
-                let mut frame = frames[k].clone();
-                // The wall-clock time at which the loop showed this frame.
-                frame.stamp_ns = t - (tau - stamps[k]);
-                counters.frames_in.fetch_add(1, Ordering::Relaxed);
-                if slot.put(frame) {
-                    counters.dropped.fetch_add(1, Ordering::Relaxed);
-                }
-            }
-        })
+    let camera = match &seq {
+        Some(seq) => mock_camera(seq, source.fps, slot.clone(), stop.clone(), counters.clone())?,
+        None => realsense_camera(source, slot.clone(), stop.clone(), counters.clone()).await?,
     };
+    let d435i = stream_d435i(config, seq.as_ref(), &session, stop.clone()).await?;
 
     // Queryables: the whole map, and the foothold under a point.
     let map_q = {
@@ -309,6 +287,9 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
     }
     stop.store(true, Ordering::Relaxed);
     camera.abort();
+    if let Some(d435i) = d435i {
+        d435i.abort();
+    }
     drop(out_rx);
     worker.join().map_err(|_| anyhow!("the extractor thread panicked"))??;
     drop((map_q, foothold_q));
@@ -478,4 +459,146 @@ pub async fn demo(config: &Config, duration: Duration, vins_rate_hz: f64) -> Res
     }
     let _ = std::fs::remove_dir_all(&dir);
     summary
+}
+
+/// The mock camera: the sequence looped on the wall clock, like the mock VINS.
+fn mock_camera(
+    seq: &Sequence,
+    fps: u32,
+    slot: Arc<Latest>,
+    stop: Arc<AtomicBool>,
+    counters: Arc<Counters>,
+) -> Result<tokio::task::JoinHandle<()>> {
+    let clock = SequenceClock::new(seq)?;
+    let stamps: Vec<u64> = seq.poses.iter().map(|p| p.stamp_ns).collect();
+    let frames: Vec<DepthFrame> = (0..seq.len()).map(|k| seq.depth(k)).collect::<Result<_, _>>()?;
+    let intrinsics = seq.intrinsics;
+    Ok(tokio::spawn(async move {
+        let mut tick = tokio::time::interval(Duration::from_secs_f64(1.0 / fps as f64));
+        let mut last_k = usize::MAX;
+        while !stop.load(Ordering::Relaxed) {
+            tick.tick().await;
+            let t = now_ns();
+            let tau = clock.sequence_time(t);
+            let k = stamps.partition_point(|&s| s <= tau).saturating_sub(1);
+            if k == last_k {
+                continue;
+            }
+            last_k = k;
+            let mut frame = frames[k].clone();
+            // The wall-clock time at which the loop showed this frame.
+            frame.stamp_ns = t - (tau - stamps[k]);
+            counters.frames_in.fetch_add(1, Ordering::Relaxed);
+            if slot.put((frame, intrinsics)) {
+                counters.dropped.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }))
+}
+
+/// The L515 (or a bag) on a thread of its own. Opened here, so a missing camera stops
+/// start-up with an error naming it; later failures reconnect with backoff.
+#[cfg(feature = "realsense")]
+async fn realsense_camera(
+    source: &crate::config::DepthSourceConfig,
+    slot: Arc<Latest>,
+    stop: Arc<AtomicBool>,
+    counters: Arc<Counters>,
+) -> Result<tokio::task::JoinHandle<()>> {
+    use crate::camera::realsense::RealsenseDepth;
+    let source = source.clone();
+    let open = move || match source.kind {
+        DepthSourceKind::Bag => RealsenseDepth::open_bag(&source.bag),
+        _ => RealsenseDepth::open(&source),
+    };
+    let first = tokio::task::spawn_blocking(open.clone()).await?.context("opening the depth camera")?;
+    tracing::info!("depth camera open: {:?}", first.intrinsics());
+    Ok(tokio::task::spawn_blocking(move || {
+        let next = |c: &mut RealsenseDepth| Ok((c.next_frame()?, c.intrinsics()));
+        let keep_going = || !stop.load(Ordering::Relaxed);
+        let stats = crate::camera::stream_with_reconnect(first, open, next, BACKOFF, keep_going, |frame| {
+            counters.frames_in.fetch_add(1, Ordering::Relaxed);
+            if slot.put(frame) {
+                counters.dropped.fetch_add(1, Ordering::Relaxed);
+            }
+            !stop.load(Ordering::Relaxed)
+        });
+        tracing::info!("depth camera stopped: {} frames, {} reconnects", stats.frames, stats.reconnects);
+    }))
+}
+
+/// Reopening a camera that stopped: first after 250 ms, doubling up to 5 s.
+#[cfg(feature = "realsense")]
+const BACKOFF: (Duration, Duration) = (Duration::from_millis(250), Duration::from_secs(5));
+
+#[cfg(not(feature = "realsense"))]
+async fn realsense_camera(
+    source: &crate::config::DepthSourceConfig,
+    _: Arc<Latest>,
+    _: Arc<AtomicBool>,
+    _: Arc<Counters>,
+) -> Result<tokio::task::JoinHandle<()>> {
+    bail!("sources.depth.kind = {:?} needs polymap built with --features realsense", source.kind)
+}
+
+/// The D435i's IR and IMU out over Zenoh for VINS: the mock along the mock camera's
+/// sequence, or the real camera with its emitter off. None when `sources.d435i.kind = none`.
+async fn stream_d435i(
+    config: &Config,
+    seq: Option<&Sequence>,
+    session: &zenoh::Session,
+    stop: Arc<AtomicBool>,
+) -> Result<Option<tokio::task::JoinHandle<()>>> {
+    use crate::camera::mock_d435i::MockD435i;
+    use crate::config::D435iKind;
+    let cfg = config.sources.d435i.clone();
+    let (tx, rx) = tokio::sync::mpsc::channel(64);
+    match cfg.kind {
+        D435iKind::None => return Ok(None),
+        D435iKind::Mock => {
+            let seq = seq.ok_or_else(|| anyhow!("sources.d435i.kind = \"mock\" needs the mock depth camera's sequence"))?;
+            let mock = MockD435i::from_sequence(seq, &extrinsic(config), &cfg).map_err(|e| anyhow!("mock D435i: {e}"))?;
+            let clock = SequenceClock::new(seq)?;
+            let cfg = cfg.clone();
+            tokio::spawn(async move { mock.run(clock, &cfg, tx).await });
+        }
+        D435iKind::Realsense => real_d435i(&cfg, tx, stop).await?,
+    }
+    let session = session.clone();
+    Ok(Some(tokio::spawn(async move {
+        if let Err(e) = crate::bus::publish_d435i(&session, &cfg.key_prefix, rx).await {
+            tracing::warn!("D435i publishing stopped: {e}");
+        }
+    })))
+}
+
+/// The real D435i on its own thread: opened (emitter off, verified) before start-up goes
+/// on; a stream that stops is reopened with backoff.
+#[cfg(feature = "realsense")]
+async fn real_d435i(
+    cfg: &crate::config::D435iConfig,
+    tx: tokio::sync::mpsc::Sender<crate::camera::D435iSample>,
+    stop: Arc<AtomicBool>,
+) -> Result<()> {
+    use crate::camera::realsense::RealsenseD435i;
+    let open_cfg = cfg.clone();
+    let first = tokio::task::spawn_blocking(move || RealsenseD435i::open(&open_cfg)).await?.context("opening the D435i")?;
+    let cfg = cfg.clone();
+    std::thread::Builder::new().name("d435i".into()).spawn(move || {
+        let open = || RealsenseD435i::open(&cfg);
+        let keep_going = || !stop.load(Ordering::Relaxed);
+        let send = |samples: Vec<_>| samples.into_iter().all(|s| tx.blocking_send(s).is_ok()) && keep_going();
+        let stats = crate::camera::stream_with_reconnect(first, open, RealsenseD435i::next_samples, BACKOFF, keep_going, send);
+        tracing::info!("D435i stopped: {} batches, {} reconnects", stats.frames, stats.reconnects);
+    })?;
+    Ok(())
+}
+
+#[cfg(not(feature = "realsense"))]
+async fn real_d435i(
+    _: &crate::config::D435iConfig,
+    _: tokio::sync::mpsc::Sender<crate::camera::D435iSample>,
+    _: Arc<AtomicBool>,
+) -> Result<()> {
+    bail!("sources.d435i.kind = \"realsense\" needs polymap built with --features realsense")
 }

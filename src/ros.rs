@@ -95,6 +95,107 @@ pub struct PoseStamped {
     pub pose: PoseMsg,
 }
 
+/// sensor_msgs/Image
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Image {
+    pub header: Header,
+    pub height: u32,
+    pub width: u32,
+    /// "mono8" for the IR images.
+    pub encoding: String,
+    pub is_bigendian: u8,
+    /// Bytes per row.
+    pub step: u32,
+    pub data: Vec<u8>,
+}
+
+/// sensor_msgs/RegionOfInterest
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RegionOfInterest {
+    pub x_offset: u32,
+    pub y_offset: u32,
+    pub height: u32,
+    pub width: u32,
+    pub do_rectify: bool,
+}
+
+/// sensor_msgs/CameraInfo
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CameraInfo {
+    pub header: Header,
+    pub height: u32,
+    pub width: u32,
+    pub distortion_model: String,
+    pub d: Vec<f64>,
+    pub k: [f64; 9],
+    pub r: [f64; 9],
+    pub p: [f64; 12],
+    pub binning_x: u32,
+    pub binning_y: u32,
+    pub roi: RegionOfInterest,
+}
+
+/// sensor_msgs/Imu
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Imu {
+    pub header: Header,
+    pub orientation: Quaternion,
+    pub orientation_covariance: [f64; 9],
+    pub angular_velocity: Point,
+    pub angular_velocity_covariance: [f64; 9],
+    pub linear_acceleration: Point,
+    pub linear_acceleration_covariance: [f64; 9],
+}
+
+/// The IR image of infra`index` as realsense-ros publishes it.
+pub fn ir_image(stamp_ns: StampNs, index: u8, intr: &crate::types::Intrinsics, pixels: Vec<u8>) -> Image {
+    Image {
+        header: Header { stamp: Time::from_ns(stamp_ns), frame_id: format!("camera_infra{index}_optical_frame") },
+        height: intr.height,
+        width: intr.width,
+        encoding: "mono8".into(),
+        is_bigendian: 0,
+        step: intr.width,
+        data: pixels,
+    }
+}
+
+/// The CameraInfo beside it: rectified images, so no distortion and R = I; infra2's
+/// projection carries the baseline (P[3] = -fx * baseline), as realsense-ros writes it.
+pub fn ir_camera_info(stamp_ns: StampNs, index: u8, intr: &crate::types::Intrinsics, baseline_m: f64) -> CameraInfo {
+    let (fx, fy, cx, cy) = (intr.fx, intr.fy, intr.cx, intr.cy);
+    let tx = if index == 2 { -fx * baseline_m } else { 0.0 };
+    CameraInfo {
+        header: Header { stamp: Time::from_ns(stamp_ns), frame_id: format!("camera_infra{index}_optical_frame") },
+        height: intr.height,
+        width: intr.width,
+        distortion_model: "plumb_bob".into(),
+        d: vec![0.0; 5],
+        k: [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
+        r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        p: [fx, 0.0, cx, tx, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0],
+        binning_x: 0,
+        binning_y: 0,
+        roi: RegionOfInterest::default(),
+    }
+}
+
+/// One united IMU sample; no orientation (covariance[0] = -1, the ROS convention).
+pub fn imu(sample: &crate::camera::ImuSample) -> Imu {
+    let v = |a: [f64; 3]| Point { x: a[0], y: a[1], z: a[2] };
+    let mut no_orientation = [0.0; 9];
+    no_orientation[0] = -1.0;
+    Imu {
+        header: Header { stamp: Time::from_ns(sample.stamp_ns), frame_id: "camera_imu_optical_frame".into() },
+        orientation: Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 },
+        orientation_covariance: no_orientation,
+        angular_velocity: v(sample.gyro),
+        angular_velocity_covariance: [0.0; 9],
+        linear_acceleration: v(sample.accel),
+        linear_acceleration_covariance: [0.0; 9],
+    }
+}
+
 /// Largest message accepted, bytes: a bound on what garbage can make the decoder allocate.
 pub const MAX_MESSAGE_BYTES: u64 = 1 << 20;
 

@@ -1,5 +1,6 @@
-//! A Python client (eclipse-zenoh from PyPI, rosbags for CDR) decodes the live map and a
-//! MarkerArray: the bytes polymap sends are what ROS 2 tools read.
+//! Python clients (eclipse-zenoh from PyPI, rosbags for CDR) decode the live map and a
+//! MarkerArray, and the mock D435i's IR images, camera infos and IMU: the bytes polymap
+//! sends are what ROS 2 tools read.
 //!
 //! scripts/test.sh makes a virtualenv with both packages and points POLYMAP_PYTHON at it.
 //! Without it the test says so and passes only outside CI.
@@ -14,7 +15,7 @@ fn python() -> Option<String> {
 }
 
 #[test]
-fn python_client_decodes_the_map_and_markers() {
+fn python_clients_decode_the_map_markers_ir_and_imu() {
     let Some(python) = python() else {
         assert!(std::env::var("CI").is_err(), "CI needs eclipse-zenoh and rosbags: run scripts/test.sh");
         eprintln!("skipped: no python with eclipse-zenoh and rosbags (scripts/test.sh makes one)");
@@ -33,7 +34,8 @@ fn python_client_decodes_the_map_and_markers() {
     std::fs::write(
         &mapper_cfg,
         format!(
-            "[sources.depth]\nsequence = {:?}\n[pipeline]\nbackend = \"cpu\"\n[zenoh]\nconfig_file = {:?}\n",
+            "[sources.depth]\nsequence = {:?}\n[sources.d435i]\nkind = \"mock\"\nir_width = 320\nir_height = 240\n\
+             [pipeline]\nbackend = \"cpu\"\n[zenoh]\nconfig_file = {:?}\n",
             seq.display().to_string(),
             zenoh_file("mapper", Some(port), None)
         ),
@@ -60,6 +62,11 @@ fn python_client_decodes_the_map_and_markers() {
         .args(["--connect", &format!("tcp/127.0.0.1:{port}"), "--timeout", "20"])
         .output()
         .unwrap();
+    let feed = Command::new(&python)
+        .arg(root.join("examples/python/vins_feed.py"))
+        .args(["--connect", &format!("tcp/127.0.0.1:{port}"), "--timeout", "15"])
+        .output()
+        .unwrap();
     let _ = (mapper.kill(), vins.kill());
     let _ = (mapper.wait(), vins.wait());
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -73,4 +80,23 @@ fn python_client_decodes_the_map_and_markers() {
     assert_eq!(v["markers"]["ns"], "polymap");
     assert_eq!(v["markers"]["type"], 4, "line strips");
     assert_eq!(v["markers"]["frame_id"], "world");
+
+    let stdout = String::from_utf8_lossy(&feed.stdout);
+    assert!(feed.status.success(), "vins_feed failed: {stdout}\n{}", String::from_utf8_lossy(&feed.stderr));
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    let s = &v["streams"];
+    assert_eq!((s["infra1/image_rect_raw"]["width"].as_u64(), s["infra1/image_rect_raw"]["height"].as_u64()), (Some(320), Some(240)));
+    assert_eq!(s["infra2/image_rect_raw"]["encoding"], "mono8");
+    assert_eq!(s["infra1/image_rect_raw"]["bytes"], 320 * 240);
+    assert!(s["infra1/image_rect_raw"]["grey_levels"].as_u64().unwrap() > 50, "textured IR: {stdout}");
+    assert_eq!(s["imu"]["frame_id"], "camera_imu_optical_frame");
+    // infra2's projection carries the 50 mm baseline: P[3] = -fx * 0.05.
+    let (fx, tx) = (s["infra2/camera_info"]["k"][0].as_f64().unwrap(), s["infra2/camera_info"]["p"][3].as_f64().unwrap());
+    assert!((tx + fx * 0.05).abs() < 1e-9 && fx > 100.0, "{stdout}");
+    assert_eq!(s["infra1/camera_info"]["p"][3].as_f64(), Some(0.0));
+    // Walking, the specific force stays near 1 g; the IMU streams at about gyro_hz (200).
+    let g = v["imu_mean_accel_norm"].as_f64().unwrap();
+    assert!((g - 9.81).abs() < 1.5, "mean |accel| {g}");
+    let rate = v["imu_rate_hz"].as_f64().unwrap();
+    assert!((120.0..260.0).contains(&rate), "IMU rate {rate} Hz");
 }

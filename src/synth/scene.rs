@@ -125,6 +125,26 @@ impl Scene {
         }
     }
 
+    /// The scene a sequence's truth.json describes (to render other sensors in it).
+    pub fn from_truth(truth: &Truth) -> Scene {
+        const LABELS: [&str; 8] = ["tread", "riser", "floor", "landing", "side", "post", "box_top", "box_side"];
+        let surfaces = truth
+            .polygons
+            .iter()
+            .map(|p| {
+                let label = LABELS.into_iter().find(|l| *l == p.label).unwrap_or("surface");
+                let boundary = p.boundary.iter().map(|&[x, y, z]| Point3::new(x, y, z)).collect();
+                Surface::new(label, p.step, p.height, boundary)
+            })
+            .collect();
+        let kind = match truth.stair.as_ref().map(|s| s.kind.as_str()) {
+            Some("spiral") => SceneKind::Spiral,
+            Some(_) => SceneKind::Straight,
+            None => SceneKind::Box,
+        };
+        Scene { kind, surfaces, stair: truth.stair.clone() }
+    }
+
     pub fn build(kind: SceneKind) -> Scene {
         match kind {
             SceneKind::Straight => straight(&StraightStair::default()),
