@@ -30,7 +30,8 @@ def summary(topic, m):
     stamp = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
     if topic == "imu":
         a, w = m.linear_acceleration, m.angular_velocity
-        return {"stamp": stamp, "frame_id": m.header.frame_id, "accel": [a.x, a.y, a.z], "gyro": [w.x, w.y, w.z]}
+        stamp_ns = int(m.header.stamp.sec) * 1_000_000_000 + int(m.header.stamp.nanosec)
+        return {"stamp": stamp, "stamp_ns": stamp_ns, "frame_id": m.header.frame_id, "accel": [a.x, a.y, a.z], "gyro": [w.x, w.y, w.z]}
     if topic.endswith("image_rect_raw"):
         data = bytes(m.data)
         return {"stamp": stamp, "frame_id": m.header.frame_id, "width": int(m.width), "height": int(m.height),

@@ -64,12 +64,23 @@ pub fn score_map(
     seq: &Sequence,
     pictures: bool,
 ) -> Result<(Vec<MapTreadScore>, Vec<image::RgbImage>), SequenceError> {
+    score_map_seen_in(map, seq, &(0..seq.len()).collect::<Vec<_>>(), pictures)
+}
+
+/// As [`score_map`], with "seen" meaning seen in `frames` only: the frames a live mapper
+/// actually processed.
+pub fn score_map_seen_in(
+    map: &MapSnapshot,
+    seq: &Sequence,
+    frames: &[usize],
+    pictures: bool,
+) -> Result<(Vec<MapTreadScore>, Vec<image::RgbImage>), SequenceError> {
     let mut images = Vec::new();
     let Some(truth) = &seq.truth else { return Ok((Vec::new(), images)) };
     let intr = &seq.intrinsics;
-    let labels: Vec<Vec<u16>> = (0..seq.len()).map(|k| seq.labels(k)).collect::<Result<_, _>>()?;
+    let labels: Vec<Vec<u16>> = frames.iter().map(|&k| seq.labels(k)).collect::<Result<_, _>>()?;
     let camera_world: Vec<Isometry3<f64>> =
-        seq.poses.iter().enumerate().map(|(k, p)| truth.true_pose(k, &p.transform).inverse()).collect();
+        frames.iter().map(|&k| truth.true_pose(k, &seq.poses[k].transform).inverse()).collect();
     let min_pixels = min_visible_pixels(intr.pixel_count());
     let mut out = Vec::new();
     for (label, t) in treads(truth) {
