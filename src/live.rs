@@ -56,6 +56,16 @@ struct Counters {
     without_pose: AtomicU64,
 }
 
+impl Counters {
+    /// A camera's new frame into the slot, counting it and the one it may replace.
+    fn offer(&self, slot: &Latest, frame: (DepthFrame, Intrinsics)) {
+        self.frames_in.fetch_add(1, Ordering::Relaxed);
+        if slot.put(frame) {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
 /// What the extractor thread hands the publisher.
 struct Outgoing {
     stamp_ns: u64,
@@ -488,10 +498,7 @@ fn mock_camera(
             let mut frame = frames[k].clone();
             // The wall-clock time at which the loop showed this frame.
             frame.stamp_ns = t - (tau - stamps[k]);
-            counters.frames_in.fetch_add(1, Ordering::Relaxed);
-            if slot.put((frame, intrinsics)) {
-                counters.dropped.fetch_add(1, Ordering::Relaxed);
-            }
+            counters.offer(&slot, (frame, intrinsics));
         }
     }))
 }
@@ -517,10 +524,7 @@ async fn realsense_camera(
         let next = |c: &mut RealsenseDepth| Ok((c.next_frame()?, c.intrinsics()));
         let keep_going = || !stop.load(Ordering::Relaxed);
         let stats = crate::camera::stream_with_reconnect(first, open, next, BACKOFF, keep_going, |frame| {
-            counters.frames_in.fetch_add(1, Ordering::Relaxed);
-            if slot.put(frame) {
-                counters.dropped.fetch_add(1, Ordering::Relaxed);
-            }
+            counters.offer(&slot, frame);
             !stop.load(Ordering::Relaxed)
         });
         tracing::info!("depth camera stopped: {} frames, {} reconnects", stats.frames, stats.reconnects);

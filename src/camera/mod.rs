@@ -91,7 +91,7 @@ pub fn set_option(sensor: &mut impl DeviceOptions, option: CamOption, value: f32
 pub fn switch_emitter_off(sensor: &mut impl DeviceOptions) -> Result<(), CameraError> {
     set_option(sensor, CamOption::EmitterEnabled, 0.0)?;
     match sensor.get(CamOption::EmitterEnabled) {
-        Some(v) if v == 0.0 => Ok(()),
+        Some(0.0) => Ok(()),
         read => Err(CameraError::Option {
             sensor: sensor.sensor_name(),
             option: CamOption::EmitterEnabled.name(),

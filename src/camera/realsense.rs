@@ -92,6 +92,19 @@ fn start_device(
     pipeline.start(Some(config)).map_err(driver(what))
 }
 
+/// A stream's pinhole intrinsics as polymap's plain type (rectified streams: no distortion).
+fn intrinsics_of(i: &realsense_rust::base::Rs2Intrinsics, depth_scale: f64) -> Intrinsics {
+    Intrinsics {
+        width: i.width() as u32,
+        height: i.height() as u32,
+        fx: i.fx() as f64,
+        fy: i.fy() as f64,
+        cx: i.ppx() as f64,
+        cy: i.ppy() as f64,
+        depth_scale,
+    }
+}
+
 /// librealsense stamps are milliseconds (f64); ours are nanoseconds.
 fn stamp_ns(frame: &impl FrameEx) -> StampNs {
     (frame.timestamp() * 1e6).round().max(0.0) as StampNs
@@ -162,15 +175,7 @@ impl RealsenseDepth {
             .iter()
             .find_map(|s| s.get_option(Rs2Option::DepthUnits))
             .ok_or_else(|| CameraError::Driver("the depth sensor reports no depth_units".into()))?;
-        let intrinsics = Intrinsics {
-            width: i.width() as u32,
-            height: i.height() as u32,
-            fx: i.fx() as f64,
-            fy: i.fy() as f64,
-            cx: i.ppx() as f64,
-            cy: i.ppy() as f64,
-            depth_scale: depth_scale as f64,
-        };
+        let intrinsics = intrinsics_of(&i, depth_scale as f64);
         if let Some(p) = intrinsics.problem() {
             return Err(CameraError::Driver(format!("the camera's intrinsics are unusable: {p}")));
         }
@@ -318,15 +323,8 @@ impl RealsenseD435i {
         for s in pipeline.profile().streams().iter().filter(|s| s.kind() == Rs2StreamKind::Infrared) {
             let i = s.intrinsics().map_err(|e| CameraError::Driver(format!("IR intrinsics: {e}")))?;
             let slot = if s.index() == 2 { 1 } else { 0 };
-            intrinsics[slot] = Intrinsics {
-                width: i.width() as u32,
-                height: i.height() as u32,
-                fx: i.fx() as f64,
-                fy: i.fy() as f64,
-                cx: i.ppx() as f64,
-                cy: i.ppy() as f64,
-                depth_scale: 0.001,
-            };
+            // IR images carry no depth; the scale is the D4xx's nominal 1 mm.
+            intrinsics[slot] = intrinsics_of(&i, 0.001);
         }
         Ok(RealsenseD435i { pipeline, uniter: ImuUniter::default(), intrinsics })
     }
