@@ -22,7 +22,10 @@ module_dir=$("$venv/bin/python" -c \
     "import importlib.util as u; s = u.find_spec('pyrealsense2'); print(s.submodule_search_locations[0] if s else '')")
 if [ -z "$module_dir" ]; then
     echo "installing pyrealsense2==$wheel_version into $venv"
-    "$venv/bin/pip" install -q --disable-pip-version-check "pyrealsense2==$wheel_version"
+    # numpy and pillow: scripts/make_bag.py reads the sequences' PNGs with them.
+    "$venv/bin/pip" install -q --disable-pip-version-check "pyrealsense2==$wheel_version" numpy==2.4.6 pillow==13.0.0
+    module_dir=$("$venv/bin/python" -c \
+        "import importlib.util as u; print(u.find_spec('pyrealsense2').submodule_search_locations[0])")
 fi
 
 if [ ! -f "$lib_dir/realsense2.pc" ] || [ ! -f "$lib_dir/librealsense2.so.2.56" ]; then
