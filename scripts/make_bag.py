@@ -1,12 +1,10 @@
-"""Records a polymap sequence's depth as a librealsense .bag, the way an L515 recording
-made with realsense-viewer looks: one Z16 depth stream with the sequence's intrinsics,
-its depth units as the sensor's depth_units option, and its stamps in the global time
-domain. polymap's `bag:` source plays it back through realsense-rust, so the tests run
-the same driver code as the robot.
+"""Records synthetic data as librealsense .bag files, the way recordings made with
+realsense-viewer look, so the tests play them back through the same driver code as the
+robot (realsense-rust over librealsense). L515-like: a polymap sequence's depth, one Z16 stream with the sequence's intrinsics,
+  its depth units as the sensor's depth_units option, stamps in the global time domain.
+      python make_bag.py SEQ OUT.bag [--frames N]
 
 Uses pyrealsense2's software_device and recorder (librealsense's own bag writer).
-
-    python make_bag.py SEQ OUT.bag [--frames N]
 """
 
 import argparse
@@ -26,6 +24,21 @@ def read_stamps(poses_txt: pathlib.Path) -> list[float]:
     return stamps
 
 
+def pinhole(width, height, fx, fy, cx, cy):
+    intr = rs.intrinsics()
+    intr.width, intr.height = width, height
+    intr.fx, intr.fy, intr.ppx, intr.ppy = fx, fy, cx, cy
+    intr.model = rs.distortion.none
+    intr.coeffs = [0.0] * 5
+    return intr
+
+
+def stamp(frame, stamp_ns, number):
+    frame.timestamp = stamp_ns * 1e-6  # librealsense stamps are milliseconds
+    frame.domain = rs.timestamp_domain.global_time
+    frame.frame_number = number
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("sequence", type=pathlib.Path)
@@ -39,11 +52,7 @@ def main() -> None:
         stamps = stamps[: args.frames]
     fps = round((len(stamps) - 1) / (stamps[-1] - stamps[0])) if len(stamps) > 1 else 30
 
-    intr = rs.intrinsics()
-    intr.width, intr.height = cam["width"], cam["height"]
-    intr.fx, intr.fy, intr.ppx, intr.ppy = cam["fx"], cam["fy"], cam["cx"], cam["cy"]
-    intr.model = rs.distortion.none
-    intr.coeffs = [0.0] * 5
+    intr = pinhole(cam["width"], cam["height"], cam["fx"], cam["fy"], cam["cx"], cam["cy"])
 
     device = rs.software_device()
     device.register_info(rs.camera_info.name, "Intel RealSense L515 (polymap synthetic)")
@@ -66,9 +75,7 @@ def main() -> None:
         frame = rs.software_video_frame()
         frame.pixels = np.ascontiguousarray(depth)
         frame.bpp, frame.stride = 2, 2 * intr.width
-        frame.timestamp = stamp_s * 1e3  # librealsense stamps are milliseconds
-        frame.domain = rs.timestamp_domain.global_time
-        frame.frame_number = k
+        stamp(frame, round(stamp_s * 1e9), k)
         frame.profile = profile
         sensor.on_video_frame(frame)
         queue.wait_for_frame(5000)

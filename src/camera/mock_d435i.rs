@@ -178,41 +178,64 @@ impl MockD435i {
     }
 
     /// Sends IMU at `gyro_hz` and IR pairs at `ir_fps`, stamped on the wall clock, with the
-    /// trajectory looped on `clock` like the mock camera and the mock VINS. Stops when the
-    /// receiver goes away.
+    /// trajectory looped on `clock` like the mock camera and the mock VINS. Stamps sit on
+    /// each stream's exact grid, as a camera's do, however late the runtime wakes; the IR
+    /// renders run beside the IMU so they never hold it up. Stops when the receiver goes away.
     pub async fn run(
         self,
         clock: crate::mock_vins::SequenceClock,
         cfg: &crate::config::D435iConfig,
         tx: tokio::sync::mpsc::Sender<D435iSample>,
     ) {
-        use crate::mock_vins::now_ns;
         let mock = std::sync::Arc::new(self);
-        let mut imu_tick = tokio::time::interval(std::time::Duration::from_secs_f64(1.0 / cfg.gyro_hz as f64));
-        let ir_period_ns = (1e9 / cfg.ir_fps as f64) as u64;
-        let mut next_ir = now_ns();
-        loop {
-            imu_tick.tick().await;
-            let t = now_ns();
-            let tau = clock.sequence_time(t);
-            let mut imu = mock.trajectory.imu(tau);
-            imu.stamp_ns = t;
-            if tx.send(D435iSample::Imu(imu)).await.is_err() {
-                return;
-            }
-            if t >= next_ir {
-                next_ir = t + ir_period_ns;
-                let m = mock.clone();
-                let pair = tokio::task::spawn_blocking(move || [1u8, 2].map(|i| m.infrared(tau, i))).await;
-                for mut ir in pair.into_iter().flatten() {
-                    if let D435iSample::Infrared { stamp_ns, .. } = &mut ir {
+        let clock = std::sync::Arc::new(clock);
+        let start = (tokio::time::Instant::now(), crate::mock_vins::now_ns());
+        let imu = {
+            let (mock, clock, tx) = (mock.clone(), clock.clone(), tx.clone());
+            every(start, cfg.gyro_hz as f64, move |t| {
+                let (mock, clock, tx) = (mock.clone(), clock.clone(), tx.clone());
+                async move {
+                    let mut imu = mock.trajectory.imu(clock.sequence_time(t));
+                    imu.stamp_ns = t;
+                    tx.send(D435iSample::Imu(imu)).await.is_ok()
+                }
+            })
+        };
+        let ir = every(start, cfg.ir_fps as f64, move |t| {
+            let (mock, clock, tx) = (mock.clone(), clock.clone(), tx.clone());
+            async move {
+                let tau = clock.sequence_time(t);
+                let Ok(pair) = tokio::task::spawn_blocking(move || [1u8, 2].map(|i| mock.infrared(tau, i))).await else {
+                    return false;
+                };
+                for mut image in pair {
+                    if let D435iSample::Infrared { stamp_ns, .. } = &mut image {
                         *stamp_ns = t;
                     }
-                    if tx.send(ir).await.is_err() {
-                        return;
+                    if tx.send(image).await.is_err() {
+                        return false;
                     }
                 }
+                true
             }
+        });
+        tokio::join!(imu, ir);
+    }
+}
+
+/// Calls `tick(stamp)` at `hz` from `start` (a runtime instant and its wall-clock stamp) on an
+/// exact grid of stamps, until it returns false. A late wake-up catches up, keeping the grid.
+async fn every<F: std::future::Future<Output = bool>>(
+    start: (tokio::time::Instant, StampNs),
+    hz: f64,
+    mut tick: impl FnMut(StampNs) -> F,
+) {
+    let period = std::time::Duration::from_secs_f64(1.0 / hz);
+    for k in 0u32.. {
+        let offset = period * k;
+        tokio::time::sleep_until(start.0 + offset).await;
+        if !tick(start.1 + offset.as_nanos() as StampNs).await {
+            return;
         }
     }
 }

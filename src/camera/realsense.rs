@@ -69,27 +69,49 @@ pub fn connected(context: &Context) -> Vec<DeviceEntry> {
         .collect()
 }
 
-/// Starts a pipeline on the camera `what` with `serial` ("" = the only one), after
-/// `prepare` has set its sensors' options.
-fn start_device(
+/// Starts one pipeline per entry of `streams` on the camera `what` with `serial` ("" = the
+/// only one), after `prepare` has set its sensors' options. Separate pipelines on one
+/// device: librealsense's pipeline keeps only the newest motion frame of each frameset, so
+/// IMU samples sharing a pipeline with the IR images are lost.
+fn start_device<const N: usize>(
     what: &'static str,
     serial: &str,
     prepare: impl FnOnce(&mut [Sensor]) -> Result<(), CameraError>,
-    streams: impl FnOnce(&mut RsConfig) -> anyhow::Result<()>,
-) -> Result<ActivePipeline, CameraError> {
+    streams: [&dyn Fn(&mut RsConfig) -> anyhow::Result<()>; N],
+) -> Result<[ActivePipeline; N], CameraError> {
     let context = Context::new().map_err(|e| CameraError::Driver(format!("librealsense context: {e}")))?;
     let found = connected(&context);
     let index = super::pick_device(&found, what, serial)?;
     let device = &context.query_devices(HashSet::new())[index];
     let mut sensors = device.sensors();
     prepare(&mut sensors)?;
+    let serial = std::ffi::CString::new(found[index].serial.clone()).unwrap_or_default();
+    let start = |streams: &dyn Fn(&mut RsConfig) -> anyhow::Result<()>| {
+        let mut config = RsConfig::new();
+        config.enable_device_from_serial(&serial).map_err(|e| CameraError::Driver(format!("{what} {serial:?}: {e}")))?;
+        streams(&mut config).map_err(driver(what))?;
+        let pipeline = InactivePipeline::try_from(&context).map_err(|e| CameraError::Driver(format!("{what}: {e}")))?;
+        pipeline.start(Some(config)).map_err(driver(what))
+    };
+    let mut started = Vec::with_capacity(N);
+    for s in streams {
+        started.push(start(s)?);
+    }
+    Ok(started.try_into().unwrap_or_else(|_| unreachable!("one pipeline per entry")))
+}
+
+/// Starts a pipeline playing `path` once, with the streams `streams` picks.
+fn start_bag(path: &Path, streams: impl FnOnce(&mut RsConfig) -> anyhow::Result<()>) -> Result<ActivePipeline, CameraError> {
+    if !path.is_file() {
+        return Err(CameraError::Driver(format!("bag {}: no such file", path.display())));
+    }
+    let fail = |e: &dyn std::fmt::Display| CameraError::Driver(format!("bag {}: {e}", path.display()));
+    let context = Context::new().map_err(|e| fail(&e))?;
     let mut config = RsConfig::new();
-    config
-        .enable_device_from_serial(&std::ffi::CString::new(found[index].serial.clone()).unwrap_or_default())
-        .map_err(|e| CameraError::Driver(format!("{what} {}: {e}", found[index].serial)))?;
-    streams(&mut config).map_err(driver(what))?;
-    let pipeline = InactivePipeline::try_from(&context).map_err(|e| CameraError::Driver(format!("{what}: {e}")))?;
-    pipeline.start(Some(config)).map_err(driver(what))
+    config.enable_device_from_file(path, false).map_err(|e| fail(&e))?;
+    streams(&mut config).map_err(|e| fail(&e))?;
+    let pipeline = InactivePipeline::try_from(&context).map_err(|e| fail(&e))?;
+    pipeline.start(Some(config)).map_err(|e| fail(&e))
 }
 
 /// A stream's pinhole intrinsics as polymap's plain type (rectified streams: no distortion).
@@ -127,7 +149,7 @@ pub struct RealsenseDepth {
 impl RealsenseDepth {
     /// The L515 named by `cfg.serial` (or the only one), with the configured profile and options.
     pub fn open(cfg: &DepthSourceConfig) -> Result<RealsenseDepth, CameraError> {
-        let pipeline = start_device(
+        let [pipeline] = start_device(
             "L515",
             &cfg.serial,
             |sensors| {
@@ -136,12 +158,12 @@ impl RealsenseDepth {
                 }
                 Ok(())
             },
-            |c| {
+            [&|c: &mut RsConfig| {
                 c.disable_all_streams()?;
                 let (w, h, fps) = (cfg.width as usize, cfg.height as usize, cfg.fps as usize);
                 c.enable_stream(Rs2StreamKind::Depth, None, w, h, Rs2Format::Z16, fps)?;
                 Ok(())
-            },
+            }],
         )?;
         Self::from_pipeline(pipeline, false)
     }
@@ -149,15 +171,7 @@ impl RealsenseDepth {
     /// Plays a `.bag` recording (realsense-viewer's, or one made by scripts/make_bag.py)
     /// through librealsense, once.
     pub fn open_bag(path: &Path) -> Result<RealsenseDepth, CameraError> {
-        if !path.is_file() {
-            return Err(CameraError::Driver(format!("bag {}: no such file", path.display())));
-        }
-        let context = Context::new().map_err(|e| CameraError::Driver(format!("librealsense context: {e}")))?;
-        let mut config = RsConfig::new();
-        config.enable_device_from_file(path, false).map_err(driver("bag"))?;
-        let pipeline = InactivePipeline::try_from(&context).map_err(|e| CameraError::Driver(format!("bag: {e}")))?;
-        let pipeline = pipeline.start(Some(config)).map_err(|e| CameraError::Driver(format!("bag {}: {e}", path.display())))?;
-        Self::from_pipeline(pipeline, true)
+        Self::from_pipeline(start_bag(path, |_| Ok(()))?, true)
     }
 
     fn from_pipeline(pipeline: ActivePipeline, recording: bool) -> Result<RealsenseDepth, CameraError> {
@@ -233,9 +247,9 @@ impl RealsenseDepth {
 
 /// librealsense plays a recording in real time, dropping the frames a busy reader misses;
 /// a recording should give every frame, the same on any machine. So on the first frame,
-/// playback is switched to wait for its reader and rewound to the start. realsense-rust has
-/// no playback API: this goes to the C API, through the playback device behind the frame's
-/// sensor.
+/// playback is switched to wait for its reader and rewound to the start (the depth stream
+/// then skips what came before the rewind by its stamps). realsense-rust has no playback
+/// API: this goes to the C API, through the playback device behind the frame's sensor.
 fn play_every_frame_from_start(frame: RsDepthFrame) -> Result<(), CameraError> {
     use realsense_sys as sys;
     fn check(err: *mut sys::rs2_error, what: &str) -> Result<(), CameraError> {
@@ -286,16 +300,21 @@ pub fn apply_l515_options(sensor: &mut impl DeviceOptions, o: &L515Options) -> R
     Ok(())
 }
 
-/// The D435i: infra1 + infra2 and the united IMU, its IR projector off.
+/// The D435i: infra1 + infra2 and the united IMU, its IR projector off. Two pipelines, IR
+/// and IMU (see [`start_device`]).
 pub struct RealsenseD435i {
-    pipeline: ActivePipeline,
+    ir: ActivePipeline,
+    imu: ActivePipeline,
     uniter: ImuUniter,
     intrinsics: [Intrinsics; 2],
+    /// Newest gyro and accel stamps passed on: a motion pipeline repeats its newest frame
+    /// of each stream in every frameset.
+    last_motion: [Option<StampNs>; 2],
 }
 
 impl RealsenseD435i {
     pub fn open(cfg: &D435iConfig) -> Result<RealsenseD435i, CameraError> {
-        let pipeline = start_device(
+        let [ir, imu] = start_device(
             "D435I",
             &cfg.serial,
             |sensors| {
@@ -309,48 +328,80 @@ impl RealsenseD435i {
                 }
                 Ok(())
             },
-            |c| {
-                c.disable_all_streams()?;
-                let (w, h, fps) = (cfg.ir_width as usize, cfg.ir_height as usize, cfg.ir_fps as usize);
-                c.enable_stream(Rs2StreamKind::Infrared, Some(1), w, h, Rs2Format::Y8, fps)?;
-                c.enable_stream(Rs2StreamKind::Infrared, Some(2), w, h, Rs2Format::Y8, fps)?;
-                c.enable_stream(Rs2StreamKind::Gyro, None, 0, 0, Rs2Format::MotionXyz32F, cfg.gyro_hz as usize)?;
-                c.enable_stream(Rs2StreamKind::Accel, None, 0, 0, Rs2Format::MotionXyz32F, cfg.accel_hz as usize)?;
-                Ok(())
-            },
+            [
+                &|c: &mut RsConfig| {
+                    c.disable_all_streams()?;
+                    let (w, h, fps) = (cfg.ir_width as usize, cfg.ir_height as usize, cfg.ir_fps as usize);
+                    c.enable_stream(Rs2StreamKind::Infrared, Some(1), w, h, Rs2Format::Y8, fps)?;
+                    c.enable_stream(Rs2StreamKind::Infrared, Some(2), w, h, Rs2Format::Y8, fps)?;
+                    Ok(())
+                },
+                &|c: &mut RsConfig| {
+                    c.disable_all_streams()?;
+                    c.enable_stream(Rs2StreamKind::Gyro, None, 0, 0, Rs2Format::MotionXyz32F, cfg.gyro_hz as usize)?;
+                    c.enable_stream(Rs2StreamKind::Accel, None, 0, 0, Rs2Format::MotionXyz32F, cfg.accel_hz as usize)?;
+                    Ok(())
+                },
+            ],
         )?;
-        let mut intrinsics = [Intrinsics::L515_320X240; 2];
-        for s in pipeline.profile().streams().iter().filter(|s| s.kind() == Rs2StreamKind::Infrared) {
-            let i = s.intrinsics().map_err(|e| CameraError::Driver(format!("IR intrinsics: {e}")))?;
-            let slot = if s.index() == 2 { 1 } else { 0 };
-            // IR images carry no depth; the scale is the D4xx's nominal 1 mm.
-            intrinsics[slot] = intrinsics_of(&i, 0.001);
-        }
-        Ok(RealsenseD435i { pipeline, uniter: ImuUniter::default(), intrinsics })
+        Self::from_pipelines(ir, imu)
     }
 
-    /// The next batch of samples: IR images and any IMU samples the batch completed.
+    fn from_pipelines(ir: ActivePipeline, imu: ActivePipeline) -> Result<RealsenseD435i, CameraError> {
+        let mut intrinsics = [Intrinsics::L515_320X240; 2];
+        for s in ir.profile().streams().iter().filter(|s| s.kind() == Rs2StreamKind::Infrared) {
+            let i = s.intrinsics().map_err(|e| CameraError::Driver(format!("IR intrinsics: {e}")))?;
+            // IR images carry no depth; the scale is the D4xx's nominal 1 mm.
+            intrinsics[if s.index() == 2 { 1 } else { 0 }] = intrinsics_of(&i, 0.001);
+        }
+        Ok(RealsenseD435i { ir, imu, uniter: ImuUniter::default(), intrinsics, last_motion: [None; 2] })
+    }
+
+    /// The next samples: IR images and the IMU samples completed so far. `Timeout` when
+    /// nothing came for 2 s.
     pub fn next_samples(&mut self) -> Result<Vec<D435iSample>, CameraError> {
-        let frames = self.pipeline.wait(Some(FRAME_TIMEOUT)).map_err(|_| CameraError::Timeout(FRAME_TIMEOUT))?;
-        let mut out = Vec::new();
-        for f in frames.frames_of_type::<InfraredFrame>() {
-            let index = f.stream_profile().index() as u8;
-            let (w, h, stride) = (f.width(), f.height(), f.stride());
-            // SAFETY: a Y8 frame holds `height` rows of `stride` bytes.
-            let data = unsafe { std::slice::from_raw_parts(f.get_data() as *const _ as *const u8, stride * h) };
-            let pixels = data.chunks_exact(stride).flat_map(|r| &r[..w]).copied().collect();
-            let intrinsics = self.intrinsics[if index == 2 { 1 } else { 0 }];
-            out.push(D435iSample::Infrared { index, stamp_ns: stamp_ns(&f), intrinsics, pixels });
+        let since = std::time::Instant::now();
+        loop {
+            let mut got = false;
+            let mut out = Vec::new();
+            let poll_err = |e: realsense_rust::pipeline::FrameWaitError| CameraError::Driver(format!("D435i: {e}"));
+            if let std::task::Poll::Ready(frames) = self.ir.poll().map_err(poll_err)? {
+                got = true;
+                for f in frames.frames_of_type::<InfraredFrame>() {
+                    let index = f.stream_profile().index() as u8;
+                    let (w, h, stride) = (f.width(), f.height(), f.stride());
+                    // SAFETY: a Y8 frame holds `height` rows of `stride` bytes.
+                    let data = unsafe { std::slice::from_raw_parts(f.get_data() as *const _ as *const u8, stride * h) };
+                    let pixels = data.chunks_exact(stride).flat_map(|r| &r[..w]).copied().collect();
+                    let intrinsics = self.intrinsics[if index == 2 { 1 } else { 0 }];
+                    out.push(D435iSample::Infrared { index, stamp_ns: stamp_ns(&f), intrinsics, pixels });
+                }
+            }
+            if let std::task::Poll::Ready(frames) = self.imu.poll().map_err(poll_err)? {
+                got = true;
+                for g in frames.frames_of_type::<GyroFrame>() {
+                    let (t, v) = (stamp_ns(&g), g.rotational_velocity());
+                    if self.last_motion[0].is_none_or(|last| t > last) {
+                        self.last_motion[0] = Some(t);
+                        self.uniter.push_gyro(t, [v[0] as f64, v[1] as f64, v[2] as f64]);
+                    }
+                }
+                for a in frames.frames_of_type::<AccelFrame>() {
+                    let (t, v) = (stamp_ns(&a), a.acceleration());
+                    if self.last_motion[1].is_none_or(|last| t > last) {
+                        self.last_motion[1] = Some(t);
+                        let united = self.uniter.push_accel(t, [v[0] as f64, v[1] as f64, v[2] as f64]);
+                        out.extend(united.into_iter().map(D435iSample::Imu));
+                    }
+                }
+            }
+            if got {
+                return Ok(out);
+            }
+            if since.elapsed() > FRAME_TIMEOUT {
+                return Err(CameraError::Timeout(FRAME_TIMEOUT));
+            }
+            std::thread::sleep(Duration::from_millis(1));
         }
-        for g in frames.frames_of_type::<GyroFrame>() {
-            let v = g.rotational_velocity();
-            self.uniter.push_gyro(stamp_ns(&g), [v[0] as f64, v[1] as f64, v[2] as f64]);
-        }
-        for a in frames.frames_of_type::<AccelFrame>() {
-            let v = a.acceleration();
-            let united = self.uniter.push_accel(stamp_ns(&a), [v[0] as f64, v[1] as f64, v[2] as f64]);
-            out.extend(united.into_iter().map(D435iSample::Imu));
-        }
-        Ok(out)
     }
 }
