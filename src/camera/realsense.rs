@@ -69,6 +69,9 @@ pub fn connected(context: &Context) -> Vec<DeviceEntry> {
         .collect()
 }
 
+/// Picks the streams of one pipeline.
+type StreamChoice<'a> = &'a dyn Fn(&mut RsConfig) -> anyhow::Result<()>;
+
 /// Starts one pipeline per entry of `streams` on the camera `what` with `serial` ("" = the
 /// only one), after `prepare` has set its sensors' options. Separate pipelines on one
 /// device: librealsense's pipeline keeps only the newest motion frame of each frameset, so
@@ -77,7 +80,7 @@ fn start_device<const N: usize>(
     what: &'static str,
     serial: &str,
     prepare: impl FnOnce(&mut [Sensor]) -> Result<(), CameraError>,
-    streams: [&dyn Fn(&mut RsConfig) -> anyhow::Result<()>; N],
+    streams: [StreamChoice; N],
 ) -> Result<[ActivePipeline; N], CameraError> {
     let context = Context::new().map_err(|e| CameraError::Driver(format!("librealsense context: {e}")))?;
     let found = connected(&context);
@@ -86,7 +89,7 @@ fn start_device<const N: usize>(
     let mut sensors = device.sensors();
     prepare(&mut sensors)?;
     let serial = std::ffi::CString::new(found[index].serial.clone()).unwrap_or_default();
-    let start = |streams: &dyn Fn(&mut RsConfig) -> anyhow::Result<()>| {
+    let start = |streams: StreamChoice| {
         let mut config = RsConfig::new();
         config.enable_device_from_serial(&serial).map_err(|e| CameraError::Driver(format!("{what} {serial:?}: {e}")))?;
         streams(&mut config).map_err(driver(what))?;
