@@ -149,7 +149,9 @@ impl MockD435i {
 /// A blotchy surface texture in [0.2, 1]: 3 cm cells of hashed brightness, so feature
 /// trackers find corners everywhere, the same from every view.
 fn texture(p: &Point3<f64>) -> f64 {
-    let cell = |v: f64| (v / 0.03).floor() as i64;
+    // The lattice is shifted off round numbers: a tread at z = 0.15 m would otherwise lie on
+    // a cell boundary and flicker between two cells pixel by pixel.
+    let cell = |v: f64| ((v + 0.0137) / 0.03).floor() as i64;
     let mut h = (cell(p.x) as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
         ^ (cell(p.y) as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
         ^ (cell(p.z) as u64).wrapping_mul(0x1656_67B1_9E37_79F9);
