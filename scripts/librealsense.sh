@@ -11,7 +11,8 @@
 #
 # Usage: source scripts/librealsense.sh VENV
 #   exports PKG_CONFIG_PATH and LD_LIBRARY_PATH so cargo finds and the tests load it.
-set -euo pipefail
+# Sourced, so it leaves shell options to its caller (scripts/test.sh runs with set -euo
+# pipefail, which stops at any failure here too).
 
 venv="$1"
 lib_dir="$PWD/target/librealsense"
