@@ -94,14 +94,18 @@ fn gyro_samples_get_the_accel_interpolated_at_their_stamps() {
     u.push_gyro(500, [9.0; 3]); // before any accel: dropped
     assert!(u.push_accel(1_000, [0.0, 0.0, 10.0]).is_empty());
     u.push_gyro(1_250, [1.0, 0.0, 0.0]);
+    u.push_gyro(1_250, [1.0, 0.0, 0.0]); // a pipeline's repeat: dropped
     u.push_gyro(1_750, [2.0, 0.0, 0.0]);
+    u.push_gyro(1_500, [7.0, 0.0, 0.0]); // back in time: dropped
     u.push_gyro(2_500, [3.0, 0.0, 0.0]);
     let out = u.push_accel(2_000, [0.0, 0.0, 14.0]);
     assert_eq!(out.len(), 2, "the gyro after the new accel waits for the next one");
     assert_eq!((out[0].stamp_ns, out[0].gyro[0], out[0].accel[2]), (1_250, 1.0, 11.0));
     assert_eq!((out[1].stamp_ns, out[1].gyro[0], out[1].accel[2]), (1_750, 2.0, 13.0));
     assert!(u.push_accel(1_900, [0.0; 3]).is_empty(), "an accel going back in time is ignored");
+    u.push_gyro(1_750, [2.0, 0.0, 0.0]); // already united: dropped
     let out = u.push_accel(3_000, [0.0, 0.0, 16.0]);
+    assert_eq!(out.len(), 1);
     assert_eq!((out[0].stamp_ns, out[0].accel[2]), (2_500, 15.0));
 }
 

@@ -156,12 +156,17 @@ pub enum D435iSample {
 pub struct ImuUniter {
     last_accel: Option<(StampNs, [f64; 3])>,
     waiting_gyro: VecDeque<(StampNs, [f64; 3])>,
+    /// Stamp of the last gyro sample united.
+    last_gyro: Option<StampNs>,
 }
 
 impl ImuUniter {
-    /// Gyro samples before the first accel are dropped: nothing to interpolate from.
+    /// Gyro samples before the first accel are dropped: nothing to interpolate from. So are
+    /// repeats and samples going back in time (a motion pipeline hands its newest sample
+    /// out again in every frameset), as `push_accel` drops them.
     pub fn push_gyro(&mut self, stamp_ns: StampNs, gyro: [f64; 3]) {
-        if self.last_accel.is_some_and(|(t, _)| stamp_ns >= t) {
+        let newest = self.waiting_gyro.back().map(|&(t, _)| t).or(self.last_gyro);
+        if self.last_accel.is_some_and(|(t, _)| stamp_ns >= t) && newest.is_none_or(|t| stamp_ns > t) {
             self.waiting_gyro.push_back((stamp_ns, gyro));
         }
     }
@@ -178,6 +183,7 @@ impl ImuUniter {
                     break;
                 }
                 self.waiting_gyro.pop_front();
+                self.last_gyro = Some(t);
                 let s = (t - t0) as f64 / (stamp_ns - t0) as f64;
                 let accel = std::array::from_fn(|i| a0[i] + s * (accel[i] - a0[i]));
                 out.push(ImuSample { stamp_ns: t, gyro: g, accel });

@@ -9,6 +9,7 @@ use std::time::Duration;
 
 use realsense_rust::config::Config as RsConfig;
 use realsense_rust::context::Context;
+use realsense_rust::device::Device;
 use realsense_rust::frame::{AccelFrame, DepthFrame as RsDepthFrame, FrameEx, GyroFrame, InfraredFrame};
 use realsense_rust::kind::{Rs2CameraInfo, Rs2Format, Rs2Option, Rs2StreamKind};
 use realsense_rust::pipeline::{ActivePipeline, InactivePipeline};
@@ -57,16 +58,12 @@ fn driver(what: &str) -> impl Fn(anyhow::Error) -> CameraError + '_ {
     move |e| CameraError::Driver(format!("{what}: {e}"))
 }
 
-/// The RealSense cameras connected now.
-pub fn connected(context: &Context) -> Vec<DeviceEntry> {
-    context
-        .query_devices(HashSet::new())
-        .iter()
-        .map(|d| DeviceEntry {
-            name: d.info(Rs2CameraInfo::Name).map(cstr).unwrap_or_default(),
-            serial: d.info(Rs2CameraInfo::SerialNumber).map(cstr).unwrap_or_default(),
-        })
-        .collect()
+/// How librealsense names a connected camera.
+fn entry(d: &Device) -> DeviceEntry {
+    DeviceEntry {
+        name: d.info(Rs2CameraInfo::Name).map(cstr).unwrap_or_default(),
+        serial: d.info(Rs2CameraInfo::SerialNumber).map(cstr).unwrap_or_default(),
+    }
 }
 
 /// Picks the streams of one pipeline.
@@ -83,10 +80,10 @@ fn start_device<const N: usize>(
     streams: [StreamChoice; N],
 ) -> Result<[ActivePipeline; N], CameraError> {
     let context = Context::new().map_err(|e| CameraError::Driver(format!("librealsense context: {e}")))?;
-    let found = connected(&context);
+    let devices = context.query_devices(HashSet::new());
+    let found: Vec<DeviceEntry> = devices.iter().map(entry).collect();
     let index = super::pick_device(&found, what, serial)?;
-    let device = &context.query_devices(HashSet::new())[index];
-    let mut sensors = device.sensors();
+    let mut sensors = devices[index].sensors();
     prepare(&mut sensors)?;
     let serial = std::ffi::CString::new(found[index].serial.clone()).unwrap_or_default();
     let start = |streams: StreamChoice| {
@@ -103,8 +100,8 @@ fn start_device<const N: usize>(
     Ok(started.try_into().unwrap_or_else(|_| unreachable!("one pipeline per entry")))
 }
 
-/// Starts a pipeline playing `path` once, with the streams `streams` picks.
-fn start_bag(path: &Path, streams: impl FnOnce(&mut RsConfig) -> anyhow::Result<()>) -> Result<ActivePipeline, CameraError> {
+/// Starts a pipeline playing all of `path`'s streams once.
+fn start_bag(path: &Path) -> Result<ActivePipeline, CameraError> {
     if !path.is_file() {
         return Err(CameraError::Driver(format!("bag {}: no such file", path.display())));
     }
@@ -112,7 +109,6 @@ fn start_bag(path: &Path, streams: impl FnOnce(&mut RsConfig) -> anyhow::Result<
     let context = Context::new().map_err(|e| fail(&e))?;
     let mut config = RsConfig::new();
     config.enable_device_from_file(path, false).map_err(|e| fail(&e))?;
-    streams(&mut config).map_err(|e| fail(&e))?;
     let pipeline = InactivePipeline::try_from(&context).map_err(|e| fail(&e))?;
     pipeline.start(Some(config)).map_err(|e| fail(&e))
 }
@@ -130,6 +126,18 @@ fn intrinsics_of(i: &realsense_rust::base::Rs2Intrinsics, depth_scale: f64) -> I
     }
 }
 
+/// The `width` x `height` pixels of an image whose rows lie `stride` bytes apart.
+///
+/// # Safety
+/// `data` must hold `height` rows of `stride` bytes, aligned for `T`, with
+/// `width * size_of::<T>() <= stride`.
+unsafe fn unstride<T: Copy>(data: &std::ffi::c_void, stride: usize, width: usize, height: usize) -> Vec<T> {
+    let row = stride / std::mem::size_of::<T>();
+    // SAFETY: as the caller promises.
+    let all = unsafe { std::slice::from_raw_parts(data as *const _ as *const T, row * height) };
+    all.chunks_exact(row).flat_map(|r| &r[..width]).copied().collect()
+}
+
 /// librealsense stamps are milliseconds (f64); ours are nanoseconds.
 fn stamp_ns(frame: &impl FrameEx) -> StampNs {
     (frame.timestamp() * 1e6).round().max(0.0) as StampNs
@@ -140,13 +148,21 @@ fn stamp_ns(frame: &impl FrameEx) -> StampNs {
 pub struct RealsenseDepth {
     pipeline: ActivePipeline,
     intrinsics: Intrinsics,
-    /// A recording ends; a camera only stops.
-    recording: bool,
-    /// Whether playback was switched from real time to every frame.
-    every_frame: bool,
-    /// After the rewind: frames left over from before it are skipped until one stamped at or
-    /// before this (the recording's start) arrives.
-    rewound_from: Option<StampNs>,
+    feed: Feed,
+}
+
+/// Where the frames come from; for a recording, how far its switch to every frame got.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Feed {
+    /// A camera only stops; it never ends.
+    Camera,
+    /// A recording as librealsense starts it: in real time, dropping what a busy reader misses.
+    RealTimePlayback,
+    /// Switched to every frame and rewound: frames left over from before the rewind are
+    /// skipped until one stamped at or before `from` (the recording's start) arrives.
+    Rewound { from: StampNs },
+    /// Every frame, in order, until the recording ends.
+    EveryFrame,
 }
 
 impl RealsenseDepth {
@@ -168,16 +184,16 @@ impl RealsenseDepth {
                 Ok(())
             }],
         )?;
-        Self::from_pipeline(pipeline, false)
+        Self::from_pipeline(pipeline, Feed::Camera)
     }
 
     /// Plays a `.bag` recording (realsense-viewer's, or one made by scripts/make_bag.py)
     /// through librealsense, once.
     pub fn open_bag(path: &Path) -> Result<RealsenseDepth, CameraError> {
-        Self::from_pipeline(start_bag(path, |_| Ok(()))?, true)
+        Self::from_pipeline(start_bag(path)?, Feed::RealTimePlayback)
     }
 
-    fn from_pipeline(pipeline: ActivePipeline, recording: bool) -> Result<RealsenseDepth, CameraError> {
+    fn from_pipeline(pipeline: ActivePipeline, feed: Feed) -> Result<RealsenseDepth, CameraError> {
         let stream = pipeline
             .profile()
             .streams()
@@ -196,11 +212,9 @@ impl RealsenseDepth {
         if let Some(p) = intrinsics.problem() {
             return Err(CameraError::Driver(format!("the camera's intrinsics are unusable: {p}")));
         }
-        Ok(RealsenseDepth { pipeline, intrinsics, recording, every_frame: false, rewound_from: None })
+        Ok(RealsenseDepth { pipeline, intrinsics, feed })
     }
-}
 
-impl RealsenseDepth {
     /// Read from the device (or the recording), never from the config.
     pub fn intrinsics(&self) -> Intrinsics {
         self.intrinsics
@@ -212,31 +226,28 @@ impl RealsenseDepth {
         loop {
             let frames = match self.pipeline.wait(Some(FRAME_TIMEOUT)) {
                 Ok(f) => f,
-                Err(_) if self.recording => return Err(CameraError::Ended),
-                Err(_) => return Err(CameraError::Timeout(FRAME_TIMEOUT)),
+                Err(_) if self.feed == Feed::Camera => return Err(CameraError::Timeout(FRAME_TIMEOUT)),
+                Err(_) => return Err(CameraError::Ended),
             };
             let Some(depth) = frames.frames_of_type::<RsDepthFrame>().pop() else { continue };
             let stamp_ns = stamp_ns(&depth);
-            if self.recording && !self.every_frame {
-                // The first frame came in real time; frames before it may be lost already.
-                play_every_frame_from_start(depth)?;
-                (self.every_frame, self.rewound_from) = (true, Some(stamp_ns));
-                continue;
-            }
-            if let Some(first) = self.rewound_from {
-                if stamp_ns > first {
+            match self.feed {
+                Feed::RealTimePlayback => {
+                    // The first frame came in real time; frames before it may be lost already.
+                    play_every_frame_from_start(depth)?;
+                    self.feed = Feed::Rewound { from: stamp_ns };
                     continue;
                 }
-                self.rewound_from = None;
+                Feed::Rewound { from } if stamp_ns > from => continue,
+                Feed::Rewound { .. } => self.feed = Feed::EveryFrame,
+                Feed::Camera | Feed::EveryFrame => {}
             }
             let (w, h) = (depth.width(), depth.height());
-            let row = depth.stride() / 2;
-            if w != self.intrinsics.width as usize || h != self.intrinsics.height as usize || row < w {
+            if w != self.intrinsics.width as usize || h != self.intrinsics.height as usize || depth.stride() < 2 * w {
                 return Err(CameraError::Driver(format!("depth frame {w}x{h} (stride {}) does not match the profile", depth.stride())));
             }
             // SAFETY: a Z16 frame holds `height` rows of `stride` bytes, 2-byte aligned.
-            let data = unsafe { std::slice::from_raw_parts(depth.get_data() as *const _ as *const u16, row * h) };
-            let pixels = data.chunks_exact(row).flat_map(|r| &r[..w]).copied().collect();
+            let pixels = unsafe { unstride::<u16>(depth.get_data(), depth.stride(), w, h) };
             return Ok(DepthFrame {
                 stamp_ns,
                 width: w as u32,
@@ -310,9 +321,6 @@ pub struct RealsenseD435i {
     imu: ActivePipeline,
     uniter: ImuUniter,
     intrinsics: [Intrinsics; 2],
-    /// Newest gyro and accel stamps passed on: a motion pipeline repeats its newest frame
-    /// of each stream in every frameset.
-    last_motion: [Option<StampNs>; 2],
 }
 
 impl RealsenseD435i {
@@ -347,17 +355,13 @@ impl RealsenseD435i {
                 },
             ],
         )?;
-        Self::from_pipelines(ir, imu)
-    }
-
-    fn from_pipelines(ir: ActivePipeline, imu: ActivePipeline) -> Result<RealsenseD435i, CameraError> {
         let mut intrinsics = [Intrinsics::L515_320X240; 2];
         for s in ir.profile().streams().iter().filter(|s| s.kind() == Rs2StreamKind::Infrared) {
             let i = s.intrinsics().map_err(|e| CameraError::Driver(format!("IR intrinsics: {e}")))?;
             // IR images carry no depth; the scale is the D4xx's nominal 1 mm.
             intrinsics[if s.index() == 2 { 1 } else { 0 }] = intrinsics_of(&i, 0.001);
         }
-        Ok(RealsenseD435i { ir, imu, uniter: ImuUniter::default(), intrinsics, last_motion: [None; 2] })
+        Ok(RealsenseD435i { ir, imu, uniter: ImuUniter::default(), intrinsics })
     }
 
     /// The next samples: IR images and the IMU samples completed so far. `Timeout` when
@@ -372,30 +376,24 @@ impl RealsenseD435i {
                 got = true;
                 for f in frames.frames_of_type::<InfraredFrame>() {
                     let index = f.stream_profile().index() as u8;
-                    let (w, h, stride) = (f.width(), f.height(), f.stride());
                     // SAFETY: a Y8 frame holds `height` rows of `stride` bytes.
-                    let data = unsafe { std::slice::from_raw_parts(f.get_data() as *const _ as *const u8, stride * h) };
-                    let pixels = data.chunks_exact(stride).flat_map(|r| &r[..w]).copied().collect();
+                    let pixels = unsafe { unstride::<u8>(f.get_data(), f.stride(), f.width(), f.height()) };
                     let intrinsics = self.intrinsics[if index == 2 { 1 } else { 0 }];
                     out.push(D435iSample::Infrared { index, stamp_ns: stamp_ns(&f), intrinsics, pixels });
                 }
             }
             if let std::task::Poll::Ready(frames) = self.imu.poll().map_err(poll_err)? {
                 got = true;
+                // A motion pipeline repeats its newest sample of each stream in every
+                // frameset; the uniter drops the repeats.
                 for g in frames.frames_of_type::<GyroFrame>() {
-                    let (t, v) = (stamp_ns(&g), g.rotational_velocity());
-                    if self.last_motion[0].is_none_or(|last| t > last) {
-                        self.last_motion[0] = Some(t);
-                        self.uniter.push_gyro(t, [v[0] as f64, v[1] as f64, v[2] as f64]);
-                    }
+                    let v = g.rotational_velocity();
+                    self.uniter.push_gyro(stamp_ns(&g), [v[0] as f64, v[1] as f64, v[2] as f64]);
                 }
                 for a in frames.frames_of_type::<AccelFrame>() {
-                    let (t, v) = (stamp_ns(&a), a.acceleration());
-                    if self.last_motion[1].is_none_or(|last| t > last) {
-                        self.last_motion[1] = Some(t);
-                        let united = self.uniter.push_accel(t, [v[0] as f64, v[1] as f64, v[2] as f64]);
-                        out.extend(united.into_iter().map(D435iSample::Imu));
-                    }
+                    let v = a.acceleration();
+                    let united = self.uniter.push_accel(stamp_ns(&a), [v[0] as f64, v[1] as f64, v[2] as f64]);
+                    out.extend(united.into_iter().map(D435iSample::Imu));
                 }
             }
             if got {
