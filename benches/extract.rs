@@ -10,6 +10,7 @@ use polymap::synth::{NoiseModel, Scene, SceneKind, noisy_depth, path::trajectory
 use polymap::types::{DepthFrame, Intrinsics};
 
 fn bench(c: &mut Criterion) {
+    polymap::keep_freed_memory();
     let scene = Scene::build(SceneKind::Straight);
     let pose = trajectory(&scene, 30)[20];
     let cfg = PipelineConfig::default();

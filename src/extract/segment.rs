@@ -15,7 +15,7 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 
 use super::cpu::ransac::{PlaneFit, PointBatch, refit};
-use super::{Grid, flood};
+use super::{Grid, flood, label_components};
 use crate::types::Intrinsics;
 
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
@@ -30,21 +30,27 @@ impl Segmentation {
     /// 8-connected components of the pixels where `boundary` is 0, those with at least
     /// `min_pixels` pixels becoming regions in scan order.
     pub fn components(boundary: &Grid<u8>, min_pixels: usize) -> Segmentation {
+        let (w, h) = (boundary.width, boundary.height);
         let free: Vec<bool> = boundary.data.iter().map(|&b| b == 0).collect();
-        let mut seg = Segmentation {
-            labels: Grid { width: boundary.width, height: boundary.height, data: vec![0; free.len()] },
-            pixels: Vec::new(),
-        };
-        let mut seen = vec![false; free.len()];
-        for start in 0..free.len() {
-            if free[start] && !seen[start] {
-                let comp = flood(start, boundary.width, boundary.height, &mut seen, |i| free[i]);
-                if comp.len() >= min_pixels {
-                    seg.push(comp);
-                }
+        let (mut labels, count) = label_components(&free, w, h);
+        let mut sizes = vec![0usize; count + 1];
+        labels.iter().for_each(|&l| sizes[l as usize] += 1);
+        // Components big enough become regions, renumbered in the same (scan) order.
+        let mut region_of = vec![0u32; count + 1];
+        let mut pixels: Vec<Vec<u32>> = Vec::new();
+        for l in 1..=count {
+            if sizes[l] >= min_pixels {
+                pixels.push(Vec::with_capacity(sizes[l]));
+                region_of[l] = pixels.len() as u32;
             }
         }
-        seg
+        for (i, l) in labels.iter_mut().enumerate() {
+            *l = region_of[*l as usize];
+            if *l != 0 {
+                pixels[*l as usize - 1].push(i as u32);
+            }
+        }
+        Segmentation { labels: Grid { width: w, height: h, data: labels }, pixels }
     }
 
     /// Adds a region of these pixels (sorted here), returning its index.
@@ -145,50 +151,59 @@ impl Segmentation {
         waves: u32,
     ) {
         let (w, h) = (self.labels.width, self.labels.height);
+        let neighbours = |i: usize| {
+            let (u, v) = (i % w, i / w);
+            [(u > 0).then(|| i - 1), (u + 1 < w).then(|| i + 1), (v > 0).then(|| i - w), (v + 1 < h).then(|| i + w)]
+                .into_iter()
+                .flatten()
+        };
+        // A pixel that did not join in one wave can only join in the next through a
+        // neighbour that did: after the first, each wave looks at those pixels only.
+        let mut candidates: Vec<u32> = (0..(w * h) as u32).filter(|&i| self.labels.data[i as usize] == 0).collect();
+        let mut queued = vec![false; w * h];
         for _ in 0..waves {
             let labels = &self.labels.data;
-            let joins: Vec<(u32, u32)> = (0..h)
-                .into_par_iter()
-                .flat_map_iter(|v| {
-                    (0..w).filter_map(move |u| {
-                        let i = v * w + u;
-                        if labels[i] != 0 {
-                            return None;
+            let joins: Vec<(u32, u32)> = candidates
+                .par_iter()
+                .with_min_len(256)
+                .filter_map(|&i| {
+                    let i = i as usize;
+                    let p = point(i, depth, intr)?;
+                    let mut best: Option<(f64, u32)> = None;
+                    for j in neighbours(i) {
+                        let l = labels[j];
+                        if l == 0 || !accepted[l as usize - 1] {
+                            continue;
                         }
-                        let p = point(i, depth, intr)?;
-                        let mut best: Option<(f64, u32)> = None;
-                        for j in [
-                            (u > 0).then(|| i - 1),
-                            (u + 1 < w).then(|| i + 1),
-                            (v > 0).then(|| i - w),
-                            (v + 1 < h).then(|| i + w),
-                        ]
-                        .into_iter()
-                        .flatten()
-                        {
-                            let l = labels[j];
-                            if l == 0 || !accepted[l as usize - 1] {
-                                continue;
-                            }
-                            let Some(fit) = &fits[l as usize - 1] else { continue };
-                            let e = fit.distance(&p);
-                            if e < dist as f64 && best.is_none_or(|(b, bl)| e < b || (e == b && l < bl)) {
-                                best = Some((e, l));
-                            }
+                        let Some(fit) = &fits[l as usize - 1] else { continue };
+                        let e = fit.distance(&p);
+                        if e < dist as f64 && best.is_none_or(|(b, bl)| e < b || (e == b && l < bl)) {
+                            best = Some((e, l));
                         }
-                        best.map(|(_, l)| (i as u32, l))
-                    })
+                    }
+                    best.map(|(_, l)| (i as u32, l))
                 })
                 .collect();
             if joins.is_empty() {
                 break;
             }
-            for (i, l) in joins {
+            for &(i, l) in &joins {
                 self.labels.data[i as usize] = l;
                 self.pixels[l as usize - 1].push(i);
             }
+            candidates.clear();
+            for &(i, _) in &joins {
+                for j in neighbours(i as usize) {
+                    if self.labels.data[j] == 0 && !std::mem::replace(&mut queued[j], true) {
+                        candidates.push(j as u32);
+                    }
+                }
+            }
+            candidates.iter().for_each(|&j| queued[j as usize] = false);
+            candidates.sort_unstable();
         }
-        self.pixels.iter_mut().for_each(|p| p.sort_unstable());
+        // Each wave appended a sorted run: the stable sort merges runs in linear time.
+        self.pixels.iter_mut().for_each(|p| p.sort());
     }
 }
 

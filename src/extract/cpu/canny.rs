@@ -9,7 +9,8 @@
 
 use rayon::prelude::*;
 
-use crate::extract::{Grid, flood};
+use super::separable;
+use crate::extract::{Grid, label_components};
 
 const SOBEL_S: [f32; 3] = [1.0, 2.0, 1.0];
 const SOBEL_D: [f32; 3] = [-1.0, 0.0, 1.0];
@@ -18,26 +19,21 @@ const SOBEL_D: [f32; 3] = [-1.0, 0.0, 1.0];
 /// a pixel whose 3x3 neighbourhood lacks a normal (magnitude 0 there).
 pub fn normal_gradient(normals: &Grid<[f32; 3]>) -> Grid<(f32, u8)> {
     let (w, h) = (normals.width, normals.height);
+    let channel = |c: usize| -> Vec<f32> { normals.data.iter().map(|n| n[c]).collect() };
+    let channels = [channel(0), channel(1), channel(2)];
+    let sobel = |c: &Vec<f32>| {
+        (separable::filter(c, w, h, &SOBEL_D, &SOBEL_S), separable::filter(c, w, h, &SOBEL_S, &SOBEL_D))
+    };
+    let [(gx0, gy0), (gx1, gy1), (gx2, gy2)] = channels.each_ref().map(sobel);
+    let valid: Vec<bool> = normals.data.iter().map(|n| *n != [0.0; 3]).collect();
+    let all_valid = separable::window_all_valid(&valid, w, h, 1);
     let mut data = vec![(0.0f32, 4u8); w * h];
     data.par_chunks_mut(w).enumerate().for_each(|(v, out)| {
-        if v == 0 || v + 1 >= h {
-            return;
-        }
-        'pixel: for u in 1..w.saturating_sub(1) {
-            let (mut gx, mut gy) = ([0.0f32; 3], [0.0f32; 3]);
-            for j in 0..3 {
-                for i in 0..3 {
-                    let n = normals.data[(v + j - 1) * w + u + i - 1];
-                    if n == [0.0; 3] {
-                        continue 'pixel;
-                    }
-                    for c in 0..3 {
-                        gx[c] += SOBEL_S[j] * SOBEL_D[i] * n[c];
-                        gy[c] += SOBEL_D[j] * SOBEL_S[i] * n[c];
-                    }
-                }
+        for (u, g) in out.iter_mut().enumerate() {
+            let i = v * w + u;
+            if all_valid[i] {
+                *g = gradient_sector([gx0[i], gx1[i], gx2[i]], [gy0[i], gy1[i], gy2[i]]);
             }
-            out[u] = gradient_sector(gx, gy);
         }
     });
     Grid { width: w, height: h, data }
@@ -90,13 +86,13 @@ pub fn classify(grad: &Grid<(f32, u8)>, low: f32, high: f32) -> Grid<u8> {
 /// Hysteresis: 1 for strong pixels and the weak ones 8-connected to them through weak pixels.
 pub fn hysteresis(class: &Grid<u8>) -> Grid<u8> {
     let (w, h) = (class.width, class.height);
-    let mut reached = vec![false; w * h];
-    for i in 0..w * h {
-        if class.data[i] == 2 && !reached[i] {
-            flood(i, w, h, &mut reached, |j| class.data[j] != 0);
-        }
+    let candidate: Vec<bool> = class.data.iter().map(|&c| c != 0).collect();
+    let (labels, count) = label_components(&candidate, w, h);
+    let mut strong = vec![false; count + 1];
+    for (&l, &c) in labels.iter().zip(&class.data) {
+        strong[l as usize] |= c == 2;
     }
-    Grid { width: w, height: h, data: reached.into_iter().map(u8::from).collect() }
+    Grid { width: w, height: h, data: labels.iter().map(|&l| u8::from(l != 0 && strong[l as usize])).collect() }
 }
 
 /// 0, 1 (weak) or 2 (strong) for pixel (u, v) after non-maximum suppression.
@@ -184,43 +180,27 @@ pub fn close(edges: &Grid<u8>, size: u32) -> Grid<u8> {
     Grid { width: edges.width, height: edges.height, data: eroded_inv.data.iter().map(|&e| 1 - e).collect() }
 }
 
-/// Binary dilation by a (2r+1)^2 square, separable: rows, then columns. `outside` is
-/// the value of pixels beyond the border.
+/// Binary dilation by a (2r+1)^2 square, separable: each row is the OR of its 2r + 1
+/// shifted copies, then each row the OR of the 2r + 1 rows around it (whole rows at
+/// a time, so both passes vectorise). `outside` is the value of pixels beyond the border.
 pub fn dilate(mask: &Grid<u8>, r: usize, outside: u8) -> Grid<u8> {
     let (w, h) = (mask.width, mask.height);
-    let window_any = |get: &dyn Fn(isize) -> u8, len: usize, out: &mut dyn FnMut(usize, u8)| {
-        // Sliding count of set pixels in [i - r, i + r].
-        let mut count: usize = 0;
-        for k in -(r as isize)..=(r as isize) {
-            count += get(k) as usize;
-        }
-        for i in 0..len {
-            out(i, (count > 0) as u8);
-            count += get(i as isize + r as isize + 1) as usize;
-            count -= get(i as isize - r as isize) as usize;
-        }
-    };
     let mut rows = vec![0u8; w * h];
-    rows.par_chunks_mut(w).enumerate().for_each(|(v, out)| {
-        let src = &mask.data[v * w..(v + 1) * w];
-        let get = |k: isize| if k < 0 || k >= w as isize { outside } else { src[k as usize] };
-        window_any(&get, w, &mut |i, x| out[i] = x);
+    rows.par_chunks_mut(w).zip(mask.data.par_chunks(w)).with_min_len(16).for_each(|(out, src)| {
+        let mut padded = vec![outside; w + 2 * r];
+        padded[r..r + w].copy_from_slice(src);
+        for k in 0..=2 * r {
+            out.iter_mut().zip(&padded[k..k + w]).for_each(|(o, &p)| *o |= p);
+        }
     });
     let mut data = vec![0u8; w * h];
-    // Columns: process in column-major order of a transposed pass for simplicity.
-    let cols: Vec<Vec<u8>> = (0..w)
-        .into_par_iter()
-        .map(|u| {
-            let get = |k: isize| if k < 0 || k >= h as isize { outside } else { rows[k as usize * w + u] };
-            let mut col = vec![0u8; h];
-            window_any(&get, h, &mut |i, x| col[i] = x);
-            col
-        })
-        .collect();
-    for (u, col) in cols.into_iter().enumerate() {
-        for (v, x) in col.into_iter().enumerate() {
-            data[v * w + u] = x;
+    data.par_chunks_mut(w).enumerate().with_min_len(16).for_each(|(v, out)| {
+        if v < r || v + r >= h {
+            out.fill(outside);
         }
-    }
+        for j in v.saturating_sub(r)..(v + r + 1).min(h) {
+            out.iter_mut().zip(&rows[j * w..(j + 1) * w]).for_each(|(o, &p)| *o |= p);
+        }
+    });
     Grid { width: w, height: h, data }
 }

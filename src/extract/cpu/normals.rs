@@ -9,6 +9,7 @@
 
 use rayon::prelude::*;
 
+use super::separable;
 use crate::extract::Grid;
 use crate::types::Intrinsics;
 
@@ -29,25 +30,17 @@ pub fn normals(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32) -> Grid<[f32; 
     let (smooth, deriv, norm) = sobel_kernel(kernel);
     let r = smooth.len() / 2;
     let (fx, fy, cx, cy) = (intr.fx as f32, intr.fy as f32, intr.cx as f32, intr.cy as f32);
+    let z = &depth.data;
+    let (zu, zv) = (separable::filter(z, w, h, deriv, smooth), separable::filter(z, w, h, smooth, deriv));
+    let valid: Vec<bool> = z.iter().map(|&z| z != 0.0).collect();
+    let all_valid = separable::window_all_valid(&valid, w, h, r);
     let mut data = vec![[0.0f32; 3]; w * h];
     data.par_chunks_mut(w).enumerate().for_each(|(v, out)| {
-        if v < r || v + r >= h {
-            return;
-        }
-        'pixel: for u in r..w.saturating_sub(r) {
-            let (mut gu, mut gv) = (0.0f32, 0.0f32);
-            for j in 0..smooth.len() {
-                let row = &depth.data[(v + j - r) * w..];
-                for i in 0..smooth.len() {
-                    let z = row[u + i - r];
-                    if z == 0.0 {
-                        continue 'pixel;
-                    }
-                    gu += smooth[j] * deriv[i] * z;
-                    gv += deriv[j] * smooth[i] * z;
-                }
+        for (u, n) in out.iter_mut().enumerate() {
+            let i = v * w + u;
+            if all_valid[i] {
+                *n = surface_normal(z[i], zu[i] / norm, zv[i] / norm, u as f32, v as f32, fx, fy, cx, cy);
             }
-            out[u] = surface_normal(depth.data[v * w + u], gu / norm, gv / norm, u as f32, v as f32, fx, fy, cx, cy);
         }
     });
     Grid { width: w, height: h, data }

@@ -1,0 +1,119 @@
+//! Separable 2-D filters for the CPU twins of the Sobel stages (normals, Canny): a row
+//! pass, then a column pass, each a sum of shifted whole rows, so the loops run over
+//! contiguous memory and vectorise. The GPU twins sum the same taps in one 2-D loop;
+//! the results agree to float rounding.
+
+use rayon::prelude::*;
+
+use super::widest_simd;
+
+/// Rows per rayon task: one row is too little work to be worth a thread hop.
+const ROWS_PER_TASK: usize = 8;
+
+/// Σ_j along_v[j] Σ_i along_u[i] ch(u + i - r, v + j - r) for every pixel at least r
+/// from the border (r = half the kernel length); 0 within r of it.
+pub fn filter(ch: &[f32], w: usize, h: usize, along_u: &[f32], along_v: &[f32]) -> Vec<f32> {
+    assert_eq!(along_u.len(), along_v.len(), "kernels of one filter have one length");
+    let r = along_u.len() / 2;
+    let mut rows = vec![0.0f32; w * h];
+    if w <= 2 * r || h <= 2 * r {
+        return rows;
+    }
+    rows.par_chunks_mut(w).zip(ch.par_chunks(w)).with_min_len(ROWS_PER_TASK).for_each(|(out, src)| {
+        row_pass(src, &mut out[r..w - r], along_u);
+    });
+    let mut out = vec![0.0f32; w * h];
+    out.par_chunks_mut(w).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, dst)| {
+        if v >= r && v + r < h {
+            column_pass(&rows[(v - r) * w..(v + r + 1) * w], &mut dst[r..w - r], w, r, along_v);
+        }
+    });
+    out
+}
+
+widest_simd! {
+    /// out[u] = Σ_i k[i] src[u + i] (out is src's interior).
+    fn row_pass(src: &[f32], out: &mut [f32], k: &[f32]) = row_pass_portable
+}
+
+#[inline(always)]
+fn row_pass_portable(src: &[f32], out: &mut [f32], k: &[f32]) {
+    let n = out.len();
+    for (i, &ki) in k.iter().enumerate() {
+        for (o, &s) in out.iter_mut().zip(&src[i..i + n]) {
+            *o += ki * s;
+        }
+    }
+}
+
+widest_simd! {
+    /// out[u] = Σ_j k[j] rows[j * w + r + u] over the 2r + 1 rows given.
+    fn column_pass(rows: &[f32], out: &mut [f32], w: usize, r: usize, k: &[f32]) = column_pass_portable
+}
+
+#[inline(always)]
+fn column_pass_portable(rows: &[f32], out: &mut [f32], w: usize, r: usize, k: &[f32]) {
+    let n = out.len();
+    for (j, &kj) in k.iter().enumerate() {
+        for (o, &s) in out.iter_mut().zip(&rows[j * w + r..j * w + r + n]) {
+            *o += kj * s;
+        }
+    }
+}
+
+/// 1 where every pixel of the (2r+1)^2 window around a pixel at least r from the border
+/// is valid, 0 elsewhere (and within r of the border).
+pub fn window_all_valid(valid: &[bool], w: usize, h: usize, r: usize) -> Vec<bool> {
+    let invalid: Vec<f32> = valid.iter().map(|&v| f32::from(u8::from(!v))).collect();
+    let ones = vec![1.0f32; 2 * r + 1];
+    // Counts of small integers: exact in f32.
+    let bad = filter(&invalid, w, h, &ones, &ones);
+    let mut out = vec![false; w * h];
+    for v in r..h.saturating_sub(r) {
+        for u in r..w.saturating_sub(r) {
+            out[v * w + u] = bad[v * w + u] == 0.0;
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn filter_equals_the_direct_2d_sum() {
+        let (w, h) = (13, 9);
+        let ch: Vec<f32> = (0..w * h).map(|i| ((i * 37) % 11) as f32 - 3.0).collect();
+        let (ku, kv) = ([1.0, 4.0, 6.0, 4.0, 1.0], [-1.0, -2.0, 0.0, 2.0, 1.0]);
+        let out = filter(&ch, w, h, &ku, &kv);
+        for v in 0..h {
+            for u in 0..w {
+                let mut want = 0.0;
+                if (2..w - 2).contains(&u) && (2..h - 2).contains(&v) {
+                    for j in 0..5 {
+                        for i in 0..5 {
+                            want += kv[j] * ku[i] * ch[(v + j - 2) * w + u + i - 2];
+                        }
+                    }
+                }
+                assert_eq!(out[v * w + u], want, "pixel ({u}, {v})");
+            }
+        }
+    }
+
+    #[test]
+    fn window_all_valid_sees_one_invalid_pixel() {
+        let (w, h) = (9, 7);
+        let mut valid = vec![true; w * h];
+        valid[3 * w + 4] = false;
+        let ok = window_all_valid(&valid, w, h, 1);
+        for v in 0..h {
+            for u in 0..w {
+                let inside = (1..w - 1).contains(&u) && (1..h - 1).contains(&v);
+                let near = u.abs_diff(4) <= 1 && v.abs_diff(3) <= 1;
+                assert_eq!(ok[v * w + u], inside && !near, "pixel ({u}, {v})");
+            }
+        }
+    }
+}
