@@ -29,13 +29,18 @@ fn gradient(@builtin(global_invocation_id) id: vec3<u32>) {
     let d = array<f32, 3>(-1.0, 0.0, 1.0);
     var gx = vec3<f32>(0.0);
     var gy = vec3<f32>(0.0);
+    // Row sums first, then the column: the CPU twin's order of sums.
     for (var j = 0u; j < 3u; j++) {
+        var row_x = vec3<f32>(0.0);
+        var row_y = vec3<f32>(0.0);
         for (var t = 0u; t < 3u; t++) {
             let n = normal_at((v + j - 1u) * p.width + u + t - 1u);
             if (all(n == vec3<f32>(0.0))) { return; }
-            gx += s[j] * d[t] * n;
-            gy += d[j] * s[t] * n;
+            row_x += d[t] * n;
+            row_y += s[t] * n;
         }
+        gx += s[j] * row_x;
+        gy += d[j] * row_y;
     }
     let xx = dot(gx, gx) / 64.0;
     let yy = dot(gy, gy) / 64.0;

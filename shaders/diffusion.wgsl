@@ -1,6 +1,6 @@
 // One Perona-Malik diffusion step of depth in metres (0 = invalid): the GPU half of
 // src/extract/cpu/diffusion.rs, with the same conductance. The CPU twin computes each
-// pixel pair's flux once and gives it to both sides, so its sums differ by rounding only.
+// pixel pair's flux once and gives it to both sides; the values and sums are the same.
 // Invalid pixels and pixels outside the image neither give nor receive flux.
 
 struct Params { width: u32, height: u32, inv_kappa: f32, gamma: f32 }
@@ -42,6 +42,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if (z == 0.0) { dst[i] = 0.0; return; }
     let u = i32(id.x);
     let v = i32(id.y);
-    let sum = flux(z, depth_at(u - 1, v)) + flux(z, depth_at(u + 1, v)) + flux(z, depth_at(u, v - 1)) + flux(z, depth_at(u, v + 1));
+    // Right and left, then below, then above: the CPU twin's order of sums.
+    let sum = flux(z, depth_at(u + 1, v)) + flux(z, depth_at(u - 1, v)) + flux(z, depth_at(u, v + 1)) + flux(z, depth_at(u, v - 1));
     dst[i] = z + p.gamma * sum;
 }

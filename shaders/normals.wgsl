@@ -31,13 +31,18 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     var gu = 0.0;
     var gv = 0.0;
     let k = 2u * r + 1u;
+    // Row sums first, then the column: the CPU twin's order of sums, so both round alike.
     for (var j = 0u; j < k; j++) {
+        var row_u = 0.0;
+        var row_v = 0.0;
         for (var t = 0u; t < k; t++) {
             let z = depth[(v + j - r) * p.width + u + t - r];
             if (z == 0.0) { write(i, vec3<f32>(0.0)); return; }
-            gu += weights[j] * weights[7u + t] * z;
-            gv += weights[7u + j] * weights[t] * z;
+            row_u += weights[7u + t] * z;
+            row_v += weights[t] * z;
         }
+        gu += weights[j] * row_u;
+        gv += weights[7u + j] * row_v;
     }
     let zu = gu / p.norm;
     let zv = gv / p.norm;

@@ -465,13 +465,11 @@ impl Config {
 
         let z = &self.zenoh;
         check_range("zenoh.pose_max_gap_s", z.pose_max_gap_s, 0.001, 10.0)?;
-        for (key, v) in
-            [
-                ("zenoh.key_prefix", &z.key_prefix),
-                ("zenoh.robot", &z.robot),
-                ("sources.d435i.key_prefix", &self.sources.d435i.key_prefix),
-            ]
-        {
+        for (key, v) in [
+            ("zenoh.key_prefix", &z.key_prefix),
+            ("zenoh.robot", &z.robot),
+            ("sources.d435i.key_prefix", &self.sources.d435i.key_prefix),
+        ] {
             if v.is_empty() || v.contains(['*', '$', '?', '#']) || v.starts_with('/') || v.ends_with('/') {
                 return Err((key, format!("{v:?} must be a non-empty key without wildcards or leading/trailing '/'")));
             }

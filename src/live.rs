@@ -132,7 +132,9 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
         DepthSourceKind::Mock => Some(Sequence::open(&source.sequence)?),
         DepthSourceKind::Realsense | DepthSourceKind::Bag => None,
         DepthSourceKind::Sequence => {
-            bail!("sources.depth.kind = \"sequence\" is for offline work (polymap replay); live needs mock, realsense or bag")
+            bail!(
+                "sources.depth.kind = \"sequence\" is for offline work (polymap replay); live needs mock, realsense or bag"
+            )
         }
     };
     let session = crate::bus::open_session(&config.zenoh).await?;
@@ -560,8 +562,10 @@ async fn stream_d435i(
     match cfg.kind {
         D435iKind::None => return Ok(None),
         D435iKind::Mock => {
-            let seq = seq.ok_or_else(|| anyhow!("sources.d435i.kind = \"mock\" needs the mock depth camera's sequence"))?;
-            let mock = MockD435i::from_sequence(seq, &extrinsic(config), &cfg).map_err(|e| anyhow!("mock D435i: {e}"))?;
+            let seq =
+                seq.ok_or_else(|| anyhow!("sources.d435i.kind = \"mock\" needs the mock depth camera's sequence"))?;
+            let mock =
+                MockD435i::from_sequence(seq, &extrinsic(config), &cfg).map_err(|e| anyhow!("mock D435i: {e}"))?;
             let clock = SequenceClock::new(seq)?;
             let cfg = cfg.clone();
             tokio::spawn(async move { mock.run(clock, &cfg, tx).await });
@@ -586,13 +590,15 @@ async fn real_d435i(
 ) -> Result<()> {
     use crate::camera::realsense::RealsenseD435i;
     let open_cfg = cfg.clone();
-    let first = tokio::task::spawn_blocking(move || RealsenseD435i::open(&open_cfg)).await?.context("opening the D435i")?;
+    let first =
+        tokio::task::spawn_blocking(move || RealsenseD435i::open(&open_cfg)).await?.context("opening the D435i")?;
     let cfg = cfg.clone();
     std::thread::Builder::new().name("d435i".into()).spawn(move || {
         let open = || RealsenseD435i::open(&cfg);
         let keep_going = || !stop.load(Ordering::Relaxed);
         let send = |samples: Vec<_>| samples.into_iter().all(|s| tx.blocking_send(s).is_ok()) && keep_going();
-        let stats = crate::camera::stream_with_reconnect(first, open, RealsenseD435i::next_samples, BACKOFF, keep_going, send);
+        let stats =
+            crate::camera::stream_with_reconnect(first, open, RealsenseD435i::next_samples, BACKOFF, keep_going, send);
         tracing::info!("D435i stopped: {} batches, {} reconnects", stats.frames, stats.reconnects);
     })?;
     Ok(())

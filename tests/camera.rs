@@ -131,10 +131,17 @@ fn a_stopped_stream_is_reopened_with_backoff_and_frames_resume() {
         Ok(c.left)
     };
     let backoff = (Duration::from_millis(1), Duration::from_millis(4));
-    let stats = stream_with_reconnect(Flaky { left: 2 }, open, next, backoff, || true, |f| {
-        received.push(f);
-        received.len() < 5
-    });
+    let stats = stream_with_reconnect(
+        Flaky { left: 2 },
+        open,
+        next,
+        backoff,
+        || true,
+        |f| {
+            received.push(f);
+            received.len() < 5
+        },
+    );
     assert_eq!(received, vec![1, 0, 2, 1, 0], "frames before the unplug, then after it");
     assert_eq!((stats.frames, stats.reconnects), (5, 1));
     assert_eq!(opens, 3, "two failed retries, then the camera came back");

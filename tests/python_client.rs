@@ -85,13 +85,17 @@ fn python_clients_decode_the_map_markers_ir_and_imu() {
     assert!(feed.status.success(), "vins_feed failed: {stdout}\n{}", String::from_utf8_lossy(&feed.stderr));
     let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
     let s = &v["streams"];
-    assert_eq!((s["infra1/image_rect_raw"]["width"].as_u64(), s["infra1/image_rect_raw"]["height"].as_u64()), (Some(320), Some(240)));
+    assert_eq!(
+        (s["infra1/image_rect_raw"]["width"].as_u64(), s["infra1/image_rect_raw"]["height"].as_u64()),
+        (Some(320), Some(240))
+    );
     assert_eq!(s["infra2/image_rect_raw"]["encoding"], "mono8");
     assert_eq!(s["infra1/image_rect_raw"]["bytes"], 320 * 240);
     assert!(s["infra1/image_rect_raw"]["grey_levels"].as_u64().unwrap() > 50, "textured IR: {stdout}");
     assert_eq!(s["imu"]["frame_id"], "camera_imu_optical_frame");
     // infra2's projection carries the 50 mm baseline: P[3] = -fx * 0.05.
-    let (fx, tx) = (s["infra2/camera_info"]["k"][0].as_f64().unwrap(), s["infra2/camera_info"]["p"][3].as_f64().unwrap());
+    let (fx, tx) =
+        (s["infra2/camera_info"]["k"][0].as_f64().unwrap(), s["infra2/camera_info"]["p"][3].as_f64().unwrap());
     assert!((tx + fx * 0.05).abs() < 1e-9 && fx > 100.0, "{stdout}");
     assert_eq!(s["infra1/camera_info"]["p"][3].as_f64(), Some(0.0));
     // The IMU sample decoded in Python is the mock's, bit for bit: recompute it from its stamp.

@@ -57,13 +57,20 @@ fn a_bag_plays_back_with_its_frames_stamps_intrinsics_and_depth_scale() {
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * b.abs().max(1.0);
         let s = &seq.intrinsics;
         assert_eq!((intr.width, intr.height), (s.width, s.height));
-        for (a, b) in [(intr.fx, s.fx), (intr.fy, s.fy), (intr.cx, s.cx), (intr.cy, s.cy), (intr.depth_scale, s.depth_scale)] {
+        for (a, b) in
+            [(intr.fx, s.fx), (intr.fy, s.fy), (intr.cx, s.cx), (intr.cy, s.cy), (intr.depth_scale, s.depth_scale)]
+        {
             assert!(close(a, b), "{name}: intrinsics {a} vs {b}");
         }
         for (k, f) in frames.iter().enumerate() {
             let want = seq.depth(k).unwrap();
             // Stamps travel as f64 milliseconds: equal to well under a microsecond.
-            assert!(f.stamp_ns.abs_diff(want.stamp_ns) < 1_000, "{name} frame {k}: stamp {} vs {}", f.stamp_ns, want.stamp_ns);
+            assert!(
+                f.stamp_ns.abs_diff(want.stamp_ns) < 1_000,
+                "{name} frame {k}: stamp {} vs {}",
+                f.stamp_ns,
+                want.stamp_ns
+            );
             assert!(f.pixels == want.pixels, "{name} frame {k}: depth units differ");
             assert_eq!(f.depth_scale, intr.depth_scale);
         }

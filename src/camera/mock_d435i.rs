@@ -64,7 +64,11 @@ impl Trajectory {
         let s = (t / self.step_s).clamp(1.0, (n - 2) as f64);
         let i = (s.floor() as usize).min(n - 3);
         let u = s - i as f64;
-        let b = [(5.0 + 3.0 * u - 3.0 * u * u + u * u * u) / 6.0, (1.0 + 3.0 * u + 3.0 * u * u - 2.0 * u * u * u) / 6.0, u * u * u / 6.0];
+        let b = [
+            (5.0 + 3.0 * u - 3.0 * u * u + u * u * u) / 6.0,
+            (1.0 + 3.0 * u + 3.0 * u * u - 2.0 * u * u * u) / 6.0,
+            u * u * u / 6.0,
+        ];
         let c = &self.control[i - 1..=i + 2];
         let mut position = c[0].translation.vector;
         let mut rotation = c[0].rotation;
@@ -169,9 +173,11 @@ impl MockD435i {
         t_body_camera: &Isometry3<f64>,
         cfg: &crate::config::D435iConfig,
     ) -> Result<MockD435i, String> {
-        let truth = seq.truth.as_ref().ok_or_else(|| format!("{}: the mock D435i needs truth.json", seq.dir.display()))?;
+        let truth =
+            seq.truth.as_ref().ok_or_else(|| format!("{}: the mock D435i needs truth.json", seq.dir.display()))?;
         let stamps: Vec<StampNs> = seq.poses.iter().map(|p| p.stamp_ns).collect();
-        let body = seq.poses.iter().enumerate().map(|(k, p)| truth.true_pose(k, &p.transform) * t_body_camera.inverse());
+        let body =
+            seq.poses.iter().enumerate().map(|(k, p)| truth.true_pose(k, &p.transform) * t_body_camera.inverse());
         Ok(MockD435i {
             scene: Scene::from_truth(truth),
             trajectory: Trajectory::new(&stamps, body.collect())?,
@@ -207,7 +213,8 @@ impl MockD435i {
             let (mock, clock, tx) = (mock.clone(), clock.clone(), tx.clone());
             async move {
                 let tau = clock.sequence_time(t);
-                let Ok(pair) = tokio::task::spawn_blocking(move || [1u8, 2].map(|i| mock.infrared(tau, i))).await else {
+                let Ok(pair) = tokio::task::spawn_blocking(move || [1u8, 2].map(|i| mock.infrared(tau, i))).await
+                else {
                     return false;
                 };
                 for mut image in pair {

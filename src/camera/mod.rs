@@ -119,10 +119,11 @@ pub fn pick_device(found: &[DeviceEntry], what: &'static str, serial: &str) -> R
         }
     };
     if !serial.is_empty() {
-        return found
-            .iter()
-            .position(|d| d.serial == serial)
-            .ok_or_else(|| CameraError::SerialNotFound { what, serial: serial.into(), found: listed() });
+        return found.iter().position(|d| d.serial == serial).ok_or_else(|| CameraError::SerialNotFound {
+            what,
+            serial: serial.into(),
+            found: listed(),
+        });
     }
     let ours: Vec<usize> =
         (0..found.len()).filter(|&i| found[i].name.to_uppercase().contains(&what.to_uppercase())).collect();
@@ -145,7 +146,12 @@ pub struct ImuSample {
 #[derive(Clone, Debug)]
 pub enum D435iSample {
     /// infra1 (left, index 1) or infra2 (right, index 2), Y8.
-    Infrared { index: u8, stamp_ns: StampNs, intrinsics: Intrinsics, pixels: Vec<u8> },
+    Infrared {
+        index: u8,
+        stamp_ns: StampNs,
+        intrinsics: Intrinsics,
+        pixels: Vec<u8>,
+    },
     Imu(ImuSample),
 }
 

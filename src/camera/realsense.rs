@@ -88,7 +88,9 @@ fn start_device<const N: usize>(
     let serial = std::ffi::CString::new(found[index].serial.clone()).unwrap_or_default();
     let start = |streams: StreamChoice| {
         let mut config = RsConfig::new();
-        config.enable_device_from_serial(&serial).map_err(|e| CameraError::Driver(format!("{what} {serial:?}: {e}")))?;
+        config
+            .enable_device_from_serial(&serial)
+            .map_err(|e| CameraError::Driver(format!("{what} {serial:?}: {e}")))?;
         streams(&mut config).map_err(driver(what))?;
         let pipeline = InactivePipeline::try_from(&context).map_err(|e| CameraError::Driver(format!("{what}: {e}")))?;
         pipeline.start(Some(config)).map_err(driver(what))
@@ -244,7 +246,10 @@ impl RealsenseDepth {
             }
             let (w, h) = (depth.width(), depth.height());
             if w != self.intrinsics.width as usize || h != self.intrinsics.height as usize || depth.stride() < 2 * w {
-                return Err(CameraError::Driver(format!("depth frame {w}x{h} (stride {}) does not match the profile", depth.stride())));
+                return Err(CameraError::Driver(format!(
+                    "depth frame {w}x{h} (stride {}) does not match the profile",
+                    depth.stride()
+                )));
             }
             // SAFETY: a Z16 frame holds `height` rows of `stride` bytes, 2-byte aligned.
             let pixels = unsafe { unstride::<u16>(depth.get_data(), depth.stride(), w, h) };

@@ -21,9 +21,8 @@ pub fn normal_gradient(normals: &Grid<[f32; 3]>) -> Grid<(f32, u8)> {
     let (w, h) = (normals.width, normals.height);
     let channel = |c: usize| -> Vec<f32> { normals.data.iter().map(|n| n[c]).collect() };
     let channels = [channel(0), channel(1), channel(2)];
-    let sobel = |c: &Vec<f32>| {
-        (separable::filter(c, w, h, &SOBEL_D, &SOBEL_S), separable::filter(c, w, h, &SOBEL_S, &SOBEL_D))
-    };
+    let sobel =
+        |c: &Vec<f32>| (separable::filter(c, w, h, &SOBEL_D, &SOBEL_S), separable::filter(c, w, h, &SOBEL_S, &SOBEL_D));
     let [(gx0, gy0), (gx1, gy1), (gx2, gy2)] = channels.each_ref().map(sobel);
     let valid: Vec<bool> = normals.data.iter().map(|n| *n != [0.0; 3]).collect();
     let all_valid = separable::window_all_valid(&valid, w, h, 1);

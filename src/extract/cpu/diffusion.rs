@@ -10,8 +10,8 @@ use rayon::prelude::*;
 use crate::extract::Grid;
 
 /// exp(-(d/kappa)^2) as 2^-t: the integer part of t by the exponent bits, the
-/// fraction by a degree-4 minimax polynomial of 2^-f on [0, 1) (relative error under
-/// 3e-6), branch-free. shaders/diffusion.wgsl has the same function, so both twins
+/// fraction by a degree-4 minimax polynomial of 2^-f on [0, 1) (under 3e-6; with the
+/// rounding of t, under 5e-6 of exp), branch-free. shaders/diffusion.wgsl has the same function, so both twins
 /// compute the same conductance.
 #[inline(always)]
 pub fn conductance(d: f32, inv_kappa: f32) -> f32 {
@@ -114,7 +114,7 @@ mod tests {
             let d = (i as f32 - 1000.0) * 1e-4;
             let exact = (-(d / 0.0335f32).powi(2)).exp();
             let approx = conductance(d, 1.0 / 0.0335);
-            assert!((approx - exact).abs() <= 3e-6 * exact + 1e-30, "d {d}: {approx} vs {exact}");
+            assert!((approx - exact).abs() <= 5e-6 * exact + 1e-30, "d {d}: {approx} vs {exact}");
         }
         assert!(conductance(10.0, 1.0 / 0.0335) < 1e-30);
     }
