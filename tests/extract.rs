@@ -308,6 +308,48 @@ fn regions_grow_back_over_their_own_plane_but_not_onto_another() {
 }
 
 #[test]
+fn at_an_inner_corner_each_region_takes_back_only_its_own_surface() {
+    use polymap::extract::segment::Segmentation;
+    let i = intr(320, 240);
+    // A floor 1 m below the camera (tilted 37 deg down) and a riser-like wall facing
+    // the camera, meeting in a horizontal line through the image centre.
+    let up = Vector3::new(0.0, -0.8, -0.6);
+    let ahead = Vector3::new(0.0, -0.6, 0.8);
+    let corner = 1.0 / 0.6 * 0.8;
+    let floor = plane_depth(&i, up, 1.0);
+    let wall = plane_depth(&i, -ahead, corner);
+    let on_wall: Vec<bool> = (0..i.pixel_count())
+        .map(|k| {
+            let ray = i.ray((k % 320) as f64, (k / 320) as f64);
+            ahead.dot(&(ray * floor.data[k] as f64)) > corner
+        })
+        .collect();
+    let depth = Grid {
+        data: (0..i.pixel_count()).map(|k| if on_wall[k] { wall.data[k] } else { floor.data[k] }).collect(),
+        ..floor.clone()
+    };
+    let corner_row = (0..240).find(|&v| !on_wall[v * 320]).unwrap();
+    assert!((100..140).contains(&corner_row), "corner at row {corner_row}");
+    // Edges and closing leave a band of rows around the corner, here reaching further
+    // up the wall than down the floor, so the floor gets to the corner first.
+    let band = corner_row - 5..=corner_row + 1;
+    let boundary =
+        Grid { width: 320, height: 240, data: (0..i.pixel_count()).map(|k| band.contains(&(k / 320)) as u8).collect() };
+    let mut seg = Segmentation::components(&boundary, 30);
+    assert_eq!(seg.pixels.len(), 2);
+    let before: Vec<usize> = seg.pixels.iter().map(Vec::len).collect();
+    // 2 cm: the wall's lowest rows lie within it of the floor's plane and the floor's
+    // highest within it of the wall's; the nearer plane must still win them.
+    let fits = ransac::fit_planes(&seg.points(&[0, 1], &depth, &i), 20, 0.02);
+    seg.grow(&fits, &[true, true], &depth, &i, 0.02, 4);
+    for (r, surface) in [(0, true), (1, false)] {
+        assert!(seg.pixels[r].len() > before[r], "region {r} grew back over its own surface");
+        let strays = seg.pixels[r].iter().filter(|&&k| on_wall[k as usize] != surface).count();
+        assert_eq!(strays, 0, "region {r} took {strays} pixels of the other surface");
+    }
+}
+
+#[test]
 fn outlines_cover_their_pixels_squares_and_holes_shrink() {
     use polymap::eval::fill_rings;
     use polymap::extract::contours::offset_ring;

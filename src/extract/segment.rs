@@ -138,9 +138,13 @@ impl Segmentation {
     }
 
     /// Grows every region with an accepted fit (`accepted[r]`) into unlabelled pixels,
-    /// `waves` pixels deep: a pixel joins the 4-neighbouring region whose plane is
-    /// nearest to its raw 3-D point, if within `dist`. Each wave reads the labels of the
-    /// one before, so the result does not depend on scan order.
+    /// `waves` pixels deep. A pixel belongs to the plane nearest to its raw 3-D point
+    /// among the accepted regions around it (if within `dist`), and joins that region
+    /// once the region has reached it (a 4-neighbour). Nearest among the regions around,
+    /// not just those already touching: at a tread's inner corner the riser's lowest
+    /// centimetre lies within `dist` of the tread's plane, and the tread would take it
+    /// before the riser got there. Each wave reads the labels of the one before, so
+    /// the result does not depend on scan order.
     pub fn grow(
         &mut self,
         fits: &[Option<PlaneFit>],
@@ -151,6 +155,7 @@ impl Segmentation {
         waves: u32,
     ) {
         let (w, h) = (self.labels.width, self.labels.height);
+        let nearby = NearbyRegions::new(self, accepted, (NEARBY_PER_WAVE * waves) as usize);
         let neighbours = |i: usize| {
             let (u, v) = (i % w, i / w);
             [(u > 0).then(|| i - 1), (u + 1 < w).then(|| i + 1), (v > 0).then(|| i - w), (v + 1 < h).then(|| i + w)]
@@ -168,20 +173,20 @@ impl Segmentation {
                 .with_min_len(256)
                 .filter_map(|&i| {
                     let i = i as usize;
+                    if !neighbours(i).any(|j| labels[j] != 0) {
+                        return None;
+                    }
                     let p = point(i, depth, intr)?;
                     let mut best: Option<(f64, u32)> = None;
-                    for j in neighbours(i) {
-                        let l = labels[j];
-                        if l == 0 || !accepted[l as usize - 1] {
-                            continue;
-                        }
+                    for &l in nearby.around(i % w, i / w) {
                         let Some(fit) = &fits[l as usize - 1] else { continue };
                         let e = fit.distance(&p);
                         if e < dist as f64 && best.is_none_or(|(b, bl)| e < b || (e == b && l < bl)) {
                             best = Some((e, l));
                         }
                     }
-                    best.map(|(_, l)| (i as u32, l))
+                    let (_, l) = best?;
+                    neighbours(i).any(|j| labels[j] == l).then_some((i as u32, l))
                 })
                 .collect();
             if joins.is_empty() {
@@ -204,6 +209,52 @@ impl Segmentation {
         }
         // Each wave appended a sorted run: the stable sort merges runs in linear time.
         self.pixels.iter_mut().for_each(|p| p.sort());
+    }
+}
+
+/// How far around a region, per wave of growth, its plane competes for pixels: far
+/// enough to cover the edge band between two regions even where neither can grow
+/// across all of it.
+const NEARBY_PER_WAVE: u32 = 4;
+
+/// Side of the square cells of `NearbyRegions`, pixels.
+const CELL_PX: usize = 16;
+
+/// For each CELL_PX square of the image, the accepted regions whose bounding box,
+/// widened by a margin, overlaps it: the planes a pixel there may belong to.
+struct NearbyRegions {
+    cells_w: usize,
+    lists: Vec<Vec<u32>>,
+}
+
+impl NearbyRegions {
+    fn new(seg: &Segmentation, accepted: &[bool], margin: usize) -> NearbyRegions {
+        let (w, h) = (seg.labels.width, seg.labels.height);
+        let (cells_w, cells_h) = (w.div_ceil(CELL_PX), h.div_ceil(CELL_PX));
+        let mut lists = vec![Vec::new(); cells_w * cells_h];
+        for (r, pixels) in seg.pixels.iter().enumerate() {
+            if !accepted[r] || pixels.is_empty() {
+                continue;
+            }
+            let (mut u0, mut v0, mut u1, mut v1) = (usize::MAX, usize::MAX, 0, 0);
+            for &i in pixels {
+                let (u, v) = (i as usize % w, i as usize / w);
+                (u0, v0, u1, v1) = (u0.min(u), v0.min(v), u1.max(u), v1.max(v));
+            }
+            let (u0, v0) = (u0.saturating_sub(margin) / CELL_PX, v0.saturating_sub(margin) / CELL_PX);
+            let (u1, v1) = ((u1 + margin).min(w - 1) / CELL_PX, (v1 + margin).min(h - 1) / CELL_PX);
+            for cv in v0..=v1 {
+                for cu in u0..=u1 {
+                    lists[cv * cells_w + cu].push(r as u32 + 1);
+                }
+            }
+        }
+        NearbyRegions { cells_w, lists }
+    }
+
+    /// Labels of the regions around pixel (u, v).
+    fn around(&self, u: usize, v: usize) -> &[u32] {
+        &self.lists[(v / CELL_PX) * self.cells_w + u / CELL_PX]
     }
 }
 
