@@ -487,19 +487,16 @@ fn mock_camera(
     let intrinsics = seq.intrinsics;
     Ok(tokio::spawn(async move {
         let mut tick = tokio::time::interval(Duration::from_secs_f64(1.0 / fps as f64));
-        let mut last_k = usize::MAX;
+        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         while !stop.load(Ordering::Relaxed) {
             tick.tick().await;
-            let t = now_ns();
-            let tau = clock.sequence_time(t);
-            let k = stamps.partition_point(|&s| s <= tau).saturating_sub(1);
-            if k == last_k {
-                continue;
-            }
-            last_k = k;
+            // Like a camera, deliver a frame when the loop shows it, stamped then: a
+            // frame is not held back until the next tick of an unrelated timer.
+            let now = now_ns();
+            let (shown, k) = clock.next_frame(now, &stamps);
+            tokio::time::sleep(Duration::from_nanos(shown.saturating_sub(now))).await;
             let mut frame = frames[k].clone();
-            // The wall-clock time at which the loop showed this frame.
-            frame.stamp_ns = t - (tau - stamps[k]);
+            frame.stamp_ns = shown;
             counters.offer(&slot, (frame, intrinsics));
         }
     }))

@@ -49,6 +49,17 @@ impl SequenceClock {
     pub fn sequence_time(&self, t_ns: StampNs) -> StampNs {
         self.first_ns + t_ns % self.period_ns
     }
+
+    /// The first frame shown after wall time `t_ns`: its wall time and index, given the
+    /// sequence's frame stamps (ascending, the first at the loop's start).
+    pub fn next_frame(&self, t_ns: StampNs, stamps: &[StampNs]) -> (StampNs, usize) {
+        let tau = self.sequence_time(t_ns);
+        let loop_start = t_ns - (tau - self.first_ns);
+        match stamps.iter().position(|&s| s > tau) {
+            Some(k) => (loop_start + (stamps[k] - self.first_ns), k),
+            None => (loop_start + self.period_ns, 0),
+        }
+    }
 }
 
 /// Publishes until `opts.duration` is over; returns how many poses went out.
