@@ -374,3 +374,42 @@ fn outlines_cover_their_pixels_squares_and_holes_shrink() {
         [outer, hole].iter().map(|r| r.iter().map(|p| [p[0] as f64, p[1] as f64]).collect()).collect();
     assert_eq!(fill_rings(&rings, 20, 12).iter().filter(|&&m| m).count(), 56, "even-odd: the hole's pixels are out");
 }
+
+#[test]
+fn a_polygon_is_cut_at_a_neighbour_plane_that_bounds_its_points_but_not_at_one_it_crosses() {
+    use polymap::extract::{Polygon, trim::trim_at_neighbour_planes};
+    let rect = |x0: f64, x1: f64| vec![[x0, 0.0, 0.0], [x1, 0.0, 0.0], [x1, 1.0, 0.0], [x0, 1.0, 0.0]];
+    let polygon = |normal: [f64; 3], offset: f64, boundary: Vec<[f64; 3]>| Polygon {
+        id: 0,
+        normal,
+        offset,
+        area: 0.0,
+        boundary,
+        holes: Vec::new(),
+        pixel_count: 0,
+        inlier_ratio: 1.0,
+        rms: 0.0,
+    };
+    let grid = |x0: f32, x1: f32, f: &dyn Fn(f32, f32) -> [f32; 3]| -> Vec<[f32; 3]> {
+        (0..=20)
+            .flat_map(|i| (0..=20).map(move |j| (i, j)))
+            .map(|(i, j)| f(x0 + (x1 - x0) * i as f32 / 20.0, j as f32 / 20.0))
+            .collect()
+    };
+    // A tread (z = 0) whose outline overshoots its points (x <= 0.28) by 2 cm, and the
+    // riser (x = 0.28, facing -x) rising from its back edge.
+    let riser =
+        polygon([-1.0, 0.0, 0.0], 0.28, vec![[0.28, 0.0, 0.0], [0.28, 1.0, 0.0], [0.28, 1.0, 0.15], [0.28, 0.0, 0.15]]);
+    let riser_points = grid(0.0, 0.15, &|z, y| [0.28, y, z]);
+    let mut polygons = vec![polygon([0.0, 0.0, 1.0], 0.0, rect(0.0, 0.30)), riser.clone()];
+    let tread_points = grid(0.0, 0.28, &|x, y| [x, y, 0.0]);
+    trim_at_neighbour_planes(&mut polygons, &[tread_points, riser_points.clone()], 0.01);
+    let max_x = polygons[0].boundary.iter().map(|v| v[0]).fold(f64::MIN, f64::max);
+    assert!((max_x - 0.28).abs() < 1e-9, "the tread ends at the riser's plane, not at {max_x}");
+    // A floor with points on both sides of a box face's plane: the plane does not bound it.
+    let mut polygons = vec![polygon([0.0, 0.0, 1.0], 0.0, rect(0.0, 0.52)), riser];
+    let floor_points = grid(0.0, 0.5, &|x, y| [x, y, 0.0]);
+    trim_at_neighbour_planes(&mut polygons, &[floor_points, riser_points], 0.01);
+    let max_x = polygons[0].boundary.iter().map(|v| v[0]).fold(f64::MIN, f64::max);
+    assert_eq!(max_x, 0.52, "the floor is left whole");
+}

@@ -10,6 +10,7 @@ pub mod cpu;
 pub mod debug;
 pub mod gpu;
 pub mod segment;
+pub mod trim;
 
 use std::time::Instant;
 
@@ -421,7 +422,7 @@ fn finish(
     );
     times.edges += lap();
     let (seg, regions, fits) = segment_and_fit(&depth, &boundary, intr, cfg, fit, times, lap)?;
-    let polygons = build_polygons(&regions, &fits, intr, cfg);
+    let polygons = build_polygons(&regions, &fits, &seg, &depth, intr, cfg);
     times.polygons = lap();
     Ok((polygons, Stages { depth, smoothed, normals, canny, boundary, labels: seg.labels, regions, fits }))
 }
@@ -463,14 +464,18 @@ pub fn segment_and_fit(
 }
 
 /// Polygons from regions and their plane fits: keep well-supported fits, ray cast the
-/// pixel outlines onto the planes, drop what is smaller than the minimum area.
+/// pixel outlines onto the planes, cut them where the planes of their neighbours bound
+/// them, drop what is smaller than the minimum area.
 pub fn build_polygons(
     regions: &[Region],
     fits: &[Option<PlaneFit>],
+    seg: &Segmentation,
+    depth: &Grid<f32>,
     intr: &Intrinsics,
     cfg: &PipelineConfig,
 ) -> Vec<Polygon> {
     let mut out = Vec::new();
+    let mut points = Vec::new();
     for (region, fit) in regions.iter().zip(fits) {
         let Some(fit) = fit else {
             tracing::debug!("region {} ({} px): no plane fit", region.label, region.pixels);
@@ -497,32 +502,29 @@ pub fn build_polygons(
         };
         let Some(boundary) = onto_plane(&region.outer) else { continue };
         let n = fit.normal;
-        // Holes smaller than a region worth keeping are sensor dropouts, not surface gaps.
-        let (holes, hole_areas): (Vec<Vec<[f64; 3]>>, Vec<f64>) = region
-            .holes
-            .iter()
-            .filter_map(|h| onto_plane(h))
-            .map(|h| {
-                let a = ring_area(&h, &n);
-                (h, a)
-            })
-            .filter(|(_, a)| *a >= cfg.min_polygon_area_m2)
-            .unzip();
-        let area = ring_area(&boundary, &n) - hole_areas.iter().sum::<f64>();
-        if area < cfg.min_polygon_area_m2 {
-            continue;
-        }
         out.push(Polygon {
-            id: out.len() as u32,
+            id: 0,
             normal: [n.x, n.y, n.z],
             offset: fit.offset,
-            area,
+            area: 0.0,
             boundary,
-            holes,
+            holes: region.holes.iter().filter_map(|h| onto_plane(h)).collect(),
             pixel_count: region.pixels,
             inlier_ratio: fit.inlier_ratio(),
             rms: fit.rms,
         });
+        points.push(seg.points(&[region.label as usize - 1], depth, intr).points);
+    }
+    trim::trim_at_neighbour_planes(&mut out, &points, cfg.ransac_inlier_distance_m);
+    out.retain_mut(|p| {
+        let n = Vector3::from(p.normal);
+        // Holes smaller than a region worth keeping are sensor dropouts, not surface gaps.
+        p.holes.retain(|h| ring_area(h, &n) >= cfg.min_polygon_area_m2);
+        p.area = ring_area(&p.boundary, &n) - p.holes.iter().map(|h| ring_area(h, &n)).sum::<f64>();
+        p.area >= cfg.min_polygon_area_m2
+    });
+    for (id, p) in out.iter_mut().enumerate() {
+        p.id = id as u32;
     }
     out
 }
