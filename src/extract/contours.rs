@@ -11,7 +11,7 @@ use imageproc::geometry::approximate_polygon_dp;
 use imageproc::point::Point;
 use rayon::prelude::*;
 
-use super::segment::Segmentation;
+use super::segment::{Segmentation, bounding_box};
 
 /// One region: its component label, outline and holes (pixel centres, simplified).
 #[derive(Clone, Debug, PartialEq)]
@@ -36,11 +36,7 @@ pub fn trace(seg: &Segmentation, simplify_px: f64) -> Vec<Region> {
                 return Region { label, outer: Vec::new(), holes: Vec::new(), pixels: 0 };
             }
             // The region's bounding box with a one-pixel margin, so its border is traced whole.
-            let (mut u0, mut v0, mut u1, mut v1) = (usize::MAX, usize::MAX, 0, 0);
-            for &i in pixels {
-                let (u, v) = (i as usize % w, i as usize / w);
-                (u0, v0, u1, v1) = (u0.min(u), v0.min(v), u1.max(u), v1.max(v));
-            }
+            let [u0, v0, u1, v1] = bounding_box(pixels, w);
             let mut mask = GrayImage::new((u1 - u0 + 3) as u32, (v1 - v0 + 3) as u32);
             for &i in pixels {
                 let (u, v) = (i as usize % w, i as usize / w);

@@ -236,11 +236,7 @@ impl NearbyRegions {
             if !accepted[r] || pixels.is_empty() {
                 continue;
             }
-            let (mut u0, mut v0, mut u1, mut v1) = (usize::MAX, usize::MAX, 0, 0);
-            for &i in pixels {
-                let (u, v) = (i as usize % w, i as usize / w);
-                (u0, v0, u1, v1) = (u0.min(u), v0.min(v), u1.max(u), v1.max(v));
-            }
+            let [u0, v0, u1, v1] = bounding_box(pixels, w);
             let (u0, v0) = (u0.saturating_sub(margin) / CELL_PX, v0.saturating_sub(margin) / CELL_PX);
             let (u1, v1) = ((u1 + margin).min(w - 1) / CELL_PX, (v1 + margin).min(h - 1) / CELL_PX);
             for cv in v0..=v1 {
@@ -256,6 +252,14 @@ impl NearbyRegions {
     fn around(&self, u: usize, v: usize) -> &[u32] {
         &self.lists[(v / CELL_PX) * self.cells_w + u / CELL_PX]
     }
+}
+
+/// [u_min, v_min, u_max, v_max] of a non-empty list of pixel indices in an image `w` wide.
+pub fn bounding_box(pixels: &[u32], w: usize) -> [usize; 4] {
+    pixels.iter().fold([usize::MAX, usize::MAX, 0, 0], |[u0, v0, u1, v1], &i| {
+        let (u, v) = (i as usize % w, i as usize / w);
+        [u0.min(u), v0.min(v), u1.max(u), v1.max(v)]
+    })
 }
 
 /// Raw camera-frame point of pixel i, None where the depth is invalid.

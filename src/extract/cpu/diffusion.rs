@@ -27,7 +27,7 @@ pub fn conductance(d: f32, inv_kappa: f32) -> f32 {
 }
 
 /// 2^-f ~ Σ EXP2_NEG[k] f^k on [0, 1), minimax in relative error (Lawson's algorithm).
-pub const EXP2_NEG: [f32; 5] = [0.9999974, -0.69303018, 0.23934102, -0.053074021, 0.0067670685];
+pub const EXP2_NEG: [f32; 5] = [0.9999974, -0.6930302, 0.23934102, -0.05307402, 0.0067670685];
 
 /// Runs `iterations` diffusion steps on depth in metres (0 = invalid).
 pub fn diffuse(depth: &Grid<f32>, iterations: u32, kappa: f32, gamma: f32) -> Grid<f32> {
