@@ -79,6 +79,40 @@ fn a_view_seen_once_shows_only_while_it_is_the_latest() {
 }
 
 #[test]
+fn outlines_are_pulled_in_for_good_except_along_edges_cut_at_a_neighbour_plane() {
+    // An L515-like focal length: a pixel spans centimetres on the tread at this distance.
+    let (pose, _) = camera();
+    let intr = Intrinsics::L515_320X240;
+    let to_camera = |p: Polygon| p.transformed(&pose.inverse());
+    let tread = |x0: f64, x1: f64| seen(&rect(x0, 0.0, x1, 1.0), 0.15, &pose);
+    // The riser behind the tread, as the extractor leaves it: the tread's back edge was cut
+    // at this plane, so its back vertices lie on it.
+    let riser = to_camera(Polygon {
+        id: 1,
+        normal: [-1.0, 0.0, 0.0],
+        offset: 0.28,
+        area: 0.15,
+        boundary: vec![[0.28, 0.0, 0.15], [0.28, 1.0, 0.15], [0.28, 1.0, 0.3], [0.28, 0.0, 0.3]],
+        holes: vec![],
+        pixel_count: 1000,
+        inlier_ratio: 1.0,
+        rms: 0.001,
+    });
+    let mut map = PolygonMap::new(&MapConfig::default());
+    for _ in 0..2 {
+        map.update(&[tread(0.0, 0.28), riser.clone()], &pose, &intr, None);
+    }
+    // A last, small view of the tread's middle, so the map shows what it keeps for good.
+    map.update(&[tread(0.1, 0.2), riser.clone()], &pose, &intr, None);
+    let snap = map.snapshot();
+    let kept = snap.polygons.iter().find(|p| p.normal[2] > 0.9).expect("the tread is mapped");
+    let xs = kept.boundary.iter().map(|v| v[0]);
+    let (x0, x1) = xs.fold((f64::MAX, f64::MIN), |(a, b), x| (a.min(x), b.max(x)));
+    assert!((x1 - 0.28).abs() < 1e-6, "the cut back edge stays at the riser: x {x1}");
+    assert!(x0 > 0.005, "the front edge, a pixel outline, is pulled in: x {x0}");
+}
+
+#[test]
 fn polygons_at_different_heights_or_tilts_stay_apart() {
     let (pose, intr) = camera();
     let mut map = PolygonMap::new(&MapConfig::default());

@@ -147,6 +147,38 @@ pub fn largest(mp: MultiPolygon<f64>) -> Option<Shape<f64>> {
     mp.0.into_iter().max_by(|a, b| a.unsigned_area().total_cmp(&b.unsigned_area()))
 }
 
+/// A ring of 3-D points on or near `frame`'s plane in 2-D, each vertex moved `d[i]` into
+/// the material: inwards for an outline, out of the hole for a hole. A vertex moves along
+/// the bisector of its edges' normals, far enough that both edges move by its d (at most
+/// twice d, on sharp corners).
+pub fn inset_ring(frame: &PlaneFrame, ring: &[[f64; 3]], d: &[f64], outline: bool) -> LineString<f64> {
+    let mut pts: Vec<Coord<f64>> = ring.iter().map(|p| frame.to_2d(p)).collect();
+    let mut d = d.to_vec();
+    let n = pts.len();
+    let area2: f64 = (0..n).map(|i| pts[i].x * pts[(i + 1) % n].y - pts[(i + 1) % n].x * pts[i].y).sum();
+    // Counter-clockwise outlines and clockwise holes have the material on their left.
+    if (area2 > 0.0) != outline {
+        pts.reverse();
+        d.reverse();
+    }
+    let left = |i: usize| {
+        let (a, b) = (pts[i], pts[(i + 1) % n]);
+        let (ex, ey) = (b.x - a.x, b.y - a.y);
+        let len = ex.hypot(ey).max(1e-12);
+        Coord { x: -ey / len, y: ex / len }
+    };
+    let moved: Vec<Coord<f64>> = (0..n)
+        .map(|i| {
+            let (a, b) = (left((i + n - 1) % n), left(i));
+            let s = Coord { x: a.x + b.x, y: a.y + b.y };
+            let dot = (s.x * a.x + s.y * a.y).max(1e-6);
+            let scale = (d[i] / dot).min(2.0 * d[i]);
+            Coord { x: pts[i].x + s.x * scale, y: pts[i].y + s.y * scale }
+        })
+        .collect();
+    LineString::from(moved)
+}
+
 /// Union of two shapes, keeping the largest connected part.
 pub fn union(a: &Shape<f64>, b: &Shape<f64>) -> Option<Shape<f64>> {
     largest(a.union(b))

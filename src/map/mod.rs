@@ -127,19 +127,24 @@ struct Observation {
     moments: Moments,
     aabb: [[f64; 3]; 2],
     horizontal: bool,
-    /// How far its outline is pulled in before it joins a map shape, m.
-    erode: f64,
+    /// How far each vertex of its outline (then of each hole) is pulled in before it joins
+    /// a map shape, m: its outline's uncertainty where that vertex was seen.
+    erode: Vec<f64>,
+    erode_holes: Vec<Vec<f64>>,
 }
 
 impl Observation {
-    /// Its shape in `frame`, pulled in by its outline's uncertainty (None if nothing is left).
+    /// Its shape in `frame`, each vertex pulled in by its outline's uncertainty there
+    /// (None if nothing is left).
     fn shape_in(&self, frame: &PlaneFrame) -> Option<Shape<f64>> {
         let s = frame.shape(&self.boundary, &self.holes);
-        if self.erode <= 0.0 {
+        if self.erode.iter().chain(self.erode_holes.iter().flatten()).all(|&d| d <= 0.0) {
             return Some(s);
         }
-        use geo::Buffer;
-        geometry::largest(s.buffer(-self.erode))
+        let outline = geometry::inset_ring(frame, &self.boundary, &self.erode, true);
+        let holes = self.holes.iter().zip(&self.erode_holes).map(|(h, d)| geometry::inset_ring(frame, h, d, false));
+        // Pulled in vertex by vertex, a thin part can fold over: the fold is cut away.
+        geometry::intersection(&Shape::new(outline, holes.collect()), &s)
     }
 }
 
@@ -353,7 +358,26 @@ impl PolygonMap {
         polygons
             .iter()
             .map(|p| {
-                let erode = (OUTLINE_UNCERTAINTY_PX * footprint(p, intrinsics)).min(MAX_ERODE_M);
+                // A vertex on the plane of another polygon of the frame lies on an edge the
+                // extractor cut there (extract::trim), known to a millimetre: it stays put.
+                let on_cut = |v: &[f64; 3]| {
+                    polygons.iter().any(|q| {
+                        !std::ptr::eq(*q, *p)
+                            && (Vector3::from(q.normal).dot(&Vector3::from(*v)) + q.offset).abs() < ON_CUT_M
+                    })
+                };
+                let erode_at = |ring: &[[f64; 3]]| -> Vec<f64> {
+                    ring.iter()
+                        .map(|v| {
+                            if on_cut(v) {
+                                0.0
+                            } else {
+                                (OUTLINE_UNCERTAINTY_PX * footprint(v, p, intrinsics)).min(MAX_ERODE_M)
+                            }
+                        })
+                        .collect()
+                };
+                let (erode, erode_holes) = (erode_at(&p.boundary), p.holes.iter().map(|h| erode_at(h)).collect());
                 let w = p.transformed(&t);
                 let mut normal = Vector3::from(w.normal);
                 let mut offset = w.offset;
@@ -369,6 +393,7 @@ impl PolygonMap {
                     moments,
                     horizontal,
                     erode,
+                    erode_holes,
                     boundary: w.boundary,
                     holes: w.holes,
                 }
@@ -558,7 +583,8 @@ impl PolygonMap {
                 plane: Plane { normal, offset: p.offset },
                 moments,
                 horizontal: false,
-                erode: 0.0,
+                erode: vec![0.0; p.boundary.len()],
+                erode_holes: p.holes.iter().map(|h| vec![0.0; h.len()]).collect(),
                 boundary: p.boundary.clone(),
                 holes: p.holes.clone(),
             };
@@ -596,26 +622,22 @@ fn shown(confirmed: Option<&Shape<f64>>, latest: Option<&Shape<f64>>, max_vertic
 /// A frame's outline is uncertain by about this many pixel footprints: its edge pixels are
 /// mixed, closed over, or belong to the neighbouring surface within the inlier distance, and
 /// ray-cast at a grazing angle each lands a whole footprint away. A union would keep every
-/// frame's overshoot, so each outline is pulled in by this much before it is kept for good;
-/// the nearest views, whose footprints are smallest, then set the map's edges.
+/// frame's overshoot, so each outline vertex is pulled in by this many footprints where it
+/// was seen before it is kept for good; the nearest views, whose footprints are smallest,
+/// then set the map's edges. Edges the extractor cut at a neighbour's plane are exact and
+/// are not pulled in.
 const OUTLINE_UNCERTAINTY_PX: f64 = 1.5;
+/// A vertex this near another plane of its frame lies on a cut (the cuts are exact to
+/// rounding), m.
+const ON_CUT_M: f64 = 1e-7;
 /// The most an outline is pulled in, m.
 const MAX_ERODE_M: f64 = 0.05;
 
-/// Median size of one pixel on the polygon's plane at its outline's vertices, m: range
-/// over focal length, stretched by the obliquity of the view.
-fn footprint(p: &Polygon, intrinsics: &Intrinsics) -> f64 {
-    let n = Vector3::from(p.normal);
-    let mut sizes: Vec<f64> = p
-        .boundary
-        .iter()
-        .map(|v| {
-            let v = Vector3::from(*v);
-            v.norm_squared() / (intrinsics.fx * n.dot(&v).abs().max(1e-6))
-        })
-        .collect();
-    sizes.sort_by(f64::total_cmp);
-    sizes.get(sizes.len() / 2).copied().unwrap_or(0.0)
+/// Size of one pixel on the polygon's plane at its vertex `v` (camera frame), m: range
+/// over focal length, stretched by the obliquity of the view there.
+fn footprint(v: &[f64; 3], p: &Polygon, intrinsics: &Intrinsics) -> f64 {
+    let v = Vector3::from(*v);
+    v.norm_squared() / (intrinsics.fx * Vector3::from(p.normal).dot(&v).abs().max(1e-6))
 }
 
 /// Why a frame polygon cannot go into the map, if it cannot.
