@@ -177,10 +177,10 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
         );
     }
     assert!(summary.treads_seen >= 5 && summary.treads_found == summary.treads_seen, "{summary:?}");
-    // Measured over runs: mean 0.98-0.99, the worst tread 0.89-0.97 (which frames the
-    // mapper keeps up with differs from run to run; see README, map accuracy).
+    // The bar: IOU >= 0.9 for every tread seen. Measured over four runs, which
+    // differ in the frames the mapper keeps up with: mean 0.99, worst tread 0.96-0.99.
     assert!(summary.iou_mean >= 0.95, "{summary:?}");
-    assert!(summary.iou_min >= 0.85, "every tread seen: {summary:?}");
+    assert!(summary.iou_min >= 0.9, "every tread seen: {summary:?}");
     assert!(summary.height_error_max_mm <= 10.0, "{summary:?}");
 
     // Nothing is mapped where nothing is: every sizeable horizontal polygon lies over a true

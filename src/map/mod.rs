@@ -371,6 +371,8 @@ impl PolygonMap {
                         .map(|v| {
                             if on_cut(v) {
                                 0.0
+                            } else if at_image_border(v, intrinsics) {
+                                (VIEW_EDGE_UNCERTAINTY_PX * footprint(v, p, intrinsics)).min(MAX_ERODE_M)
                             } else {
                                 (OUTLINE_UNCERTAINTY_PX * footprint(v, p, intrinsics)).min(MAX_ERODE_M)
                             }
@@ -627,11 +629,28 @@ fn shown(confirmed: Option<&Shape<f64>>, latest: Option<&Shape<f64>>, max_vertic
 /// then set the map's edges. Edges the extractor cut at a neighbour's plane are exact and
 /// are not pulled in.
 const OUTLINE_UNCERTAINTY_PX: f64 = 1.5;
+/// Where an outline runs along the image's border it is where the view ends, not the
+/// surface: the pixels there have no normals to check them and no neighbour beyond to
+/// stop their region growing over the next surface's first centimetre, seen at the
+/// most grazing angle of the frame. Pulled in further; other views see past it.
+const VIEW_EDGE_UNCERTAINTY_PX: f64 = 4.0;
+/// An outline vertex within this many pixels of the image's border is on it.
+const VIEW_EDGE_PX: f64 = 2.0;
 /// A vertex this near another plane of its frame lies on a cut (the cuts are exact to
 /// rounding), m.
 const ON_CUT_M: f64 = 1e-7;
 /// The most an outline is pulled in, m.
 const MAX_ERODE_M: f64 = 0.05;
+
+/// Whether a camera-frame vertex projects onto the image's border band.
+fn at_image_border(v: &[f64; 3], intr: &Intrinsics) -> bool {
+    if v[2] <= 0.0 {
+        return false;
+    }
+    let (u, r) = (intr.fx * v[0] / v[2] + intr.cx, intr.fy * v[1] / v[2] + intr.cy);
+    let (w, h) = (intr.width as f64, intr.height as f64);
+    u < VIEW_EDGE_PX || r < VIEW_EDGE_PX || u > w - 1.0 - VIEW_EDGE_PX || r > h - 1.0 - VIEW_EDGE_PX
+}
 
 /// Size of one pixel on the polygon's plane at its vertex `v` (camera frame), m: range
 /// over focal length, stretched by the obliquity of the view there.
