@@ -214,6 +214,31 @@ fn stair_frame_yields_level_treads_at_the_right_heights() {
 }
 
 #[test]
+fn a_tread_running_off_the_top_of_the_image_ends_near_its_back_edge() {
+    // Frame 45 of the 180-frame walk: tread 2 (x 0.28..0.56, z 0.30) runs off the top of
+    // the image, where the next riser begins; its outline's pixels there can be the riser's
+    // first, within the inlier distance of the tread's plane, which ray-cast onto it at
+    // this grazing angle land 4-6 cm past the back edge.
+    let scene = Scene::build(SceneKind::Straight);
+    let i = intr(320, 240);
+    let pose = trajectory(&scene, 180)[45];
+    let pixels = noisy_depth(&render(&scene, &i, &pose), &NoiseModel::l515(2.0), 4, 45);
+    let depth = DepthFrame { stamp_ns: 0, width: i.width, height: i.height, depth_scale: i.depth_scale, pixels };
+    let (out, _, _) = extract_cpu(&depth, &i, &PipelineConfig::default()).unwrap();
+    let tread = out
+        .polygons
+        .iter()
+        .map(|p| p.transformed(&pose))
+        .find(|w| w.normal[2] > 0.99 && (w.centroid()[2] - 0.30).abs() < 0.01)
+        .expect("tread 2 is found");
+    let mut far: Vec<f64> = tread.boundary.iter().map(|v| v[0]).filter(|&x| x > 0.45).collect();
+    far.sort_by(f64::total_cmp);
+    assert!(far.len() >= 2, "the outline reaches the back edge: {:?}", tread.boundary);
+    let median = far[far.len() / 2];
+    assert!((0.55..0.58).contains(&median), "the far edge's vertices end near x = 0.56: {far:?}");
+}
+
+#[test]
 fn all_invalid_frame_gives_no_polygons_and_a_bad_frame_an_error() {
     let i = intr(64, 48);
     let empty = DepthFrame { stamp_ns: 5, width: 64, height: 48, depth_scale: 0.00025, pixels: vec![0; 64 * 48] };

@@ -500,7 +500,8 @@ pub fn build_polygons(
                 })
                 .collect()
         };
-        let Some(boundary) = onto_plane(&region.outer) else { continue };
+        let Some(mut boundary) = onto_plane(&region.outer) else { continue };
+        drop_border_vertices_onto_plane(&mut boundary, &region.outer, region.label, seg, depth, intr, fit);
         let n = fit.normal;
         out.push(Polygon {
             id: 0,
@@ -527,6 +528,59 @@ pub fn build_polygons(
         p.id = id as u32;
     }
     out
+}
+
+/// Where a region meets the image's border there are no normals to stop its growth, and
+/// its pixels there can be the next surface's first (a riser above a far tread, within the
+/// inlier distance of the tread's plane). Ray-cast onto the plane at a grazing angle they
+/// land centimetres beyond the edge; their measured points, dropped straight onto the
+/// plane, land where they are. So a border vertex moves by what dropping its pixel's point
+/// instead of ray-casting it changes, when that pulls it towards the polygon's inside (a
+/// pixel of the plane itself moves by its depth noise either way: only shrinking is safe).
+/// Outline vertices within this many pixels of the image's edge are on its border.
+const BORDER_PX: i64 = 3;
+
+fn drop_border_vertices_onto_plane(
+    boundary: &mut [[f64; 3]],
+    outline_px: &[[f32; 2]],
+    label: u32,
+    seg: &Segmentation,
+    depth: &Grid<f32>,
+    intr: &Intrinsics,
+    fit: &PlaneFit,
+) {
+    let (w, h) = (depth.width as i64, depth.height as i64);
+    let n = boundary.len().max(1) as f64;
+    let centre = boundary.iter().fold(Vector3::zeros(), |acc, v| acc + Vector3::from(*v)) / n;
+    for (vertex, &[u, v]) in boundary.iter_mut().zip(outline_px) {
+        let (pu, pv) = ((u.round() as i64).clamp(0, w - 1), (v.round() as i64).clamp(0, h - 1));
+        if pu >= BORDER_PX && pv >= BORDER_PX && pu < w - BORDER_PX && pv < h - BORDER_PX {
+            continue;
+        }
+        // The region's pixel at the vertex (it lies half a pixel outside its pixels).
+        let Some((x, y)) = (-1..=1)
+            .flat_map(|dv| (-1..=1).map(move |du| (pu + du, pv + dv)))
+            .filter(|&(x, y)| x >= 0 && y >= 0 && x < w && y < h)
+            .find(|&(x, y)| {
+                let i = (y * w + x) as usize;
+                seg.labels.data[i] == label && depth.data[i] > 0.0
+            })
+        else {
+            continue;
+        };
+        let ray = intr.ray(x as f64, y as f64);
+        let measured = ray * depth.data[(y * w + x) as usize] as f64;
+        let dropped = measured - fit.normal * (fit.normal.dot(&measured) + fit.offset);
+        let Some(t) = Some(-fit.offset / fit.normal.dot(&ray)).filter(|t| t.is_finite() && *t > 0.0) else {
+            continue;
+        };
+        let shift = dropped - ray * t;
+        let v3 = Vector3::from(*vertex);
+        if shift.dot(&(centre - v3)) > 0.0 {
+            let moved = v3 + shift;
+            *vertex = [moved.x, moved.y, moved.z];
+        }
+    }
 }
 
 /// Area of a planar ring, m^2 (Newell's method, magnitude).
