@@ -11,12 +11,16 @@ use polymap::map::{Label, MapSnapshot, PolygonMap, persist};
 use polymap::types::Intrinsics;
 use proptest::prelude::*;
 
-/// A camera 2 m up and 2 m back looking 45 deg down along +x; so sharp (huge focal length)
-/// that outlines are pulled in by micrometres only.
+/// A camera 2 m up and 2 m back looking 45 deg down along +x, with a wide view (about
+/// 125 deg) so sharp (huge focal length) that outlines are pulled in by micrometres only.
 fn camera() -> (Isometry3<f64>, Intrinsics) {
     let pose = polymap::synth::path::camera_pose(Point3::new(-2.0, 0.0, 2.0), 0.0, 45f64.to_radians(), 0.0);
-    let intr = Intrinsics { width: 640, height: 480, fx: 1e6, fy: 1e6, cx: 320.0, cy: 240.0, depth_scale: 0.00025 };
-    (pose, intr)
+    (pose, sharp(4e6, 4e6))
+}
+
+/// A pinhole of focal length 1e6 px with a `w` x `h` image centred on its axis.
+fn sharp(w: f64, h: f64) -> Intrinsics {
+    Intrinsics { width: w as u32, height: h as u32, fx: 1e6, fy: 1e6, cx: w / 2.0, cy: h / 2.0, depth_scale: 0.00025 }
 }
 
 /// A horizontal polygon at height `z` with outline `xy` (world), as the camera sees it.
@@ -43,10 +47,11 @@ fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<[f64; 2]> {
 fn overlapping_views_merge_into_their_true_non_convex_union() {
     let (pose, intr) = camera();
     let mut map = PolygonMap::new(&MapConfig::default());
-    // An L seen as its two arms, each twice (a shape joins for good once two frames saw it).
+    // An L seen as its two arms, each by two frames (a shape joins for good once two frames
+    // saw it; one frame's view goes when the next looks there and does not see it).
     let arm_x = rect(0.0, 0.0, 1.0, 0.3);
     let arm_y = rect(0.0, 0.0, 0.3, 1.0);
-    for arm in [&arm_x, &arm_y, &arm_x, &arm_y] {
+    for arm in [&arm_x, &arm_x, &arm_y, &arm_y] {
         map.update(&[seen(arm, 0.0, &pose)], &pose, &intr, None);
     }
     let snap = map.snapshot();
@@ -65,14 +70,21 @@ fn overlapping_views_merge_into_their_true_non_convex_union() {
 }
 
 #[test]
-fn a_view_seen_once_shows_only_while_it_is_the_latest() {
+fn what_one_frame_saw_stays_until_a_later_frame_looks_there_and_does_not_see_it() {
     let (pose, intr) = camera();
     let mut map = PolygonMap::new(&MapConfig::default());
     let tread = rect(0.0, 0.0, 0.28, 1.0);
     map.update(&[seen(&tread, 0.15, &pose)], &pose, &intr, None);
-    // One frame's leak 10 cm past the back edge, then the tread again.
+    // One frame's leak 10 cm past the back edge.
     map.update(&[seen(&rect(0.0, 0.0, 0.38, 1.0), 0.15, &pose)], &pose, &intr, None);
     assert!((map.snapshot().polygons[0].area - 0.38).abs() < 1e-4, "the latest view shows");
+    // A camera 1 m over the tread looking straight down sees x in -0.08..0.22 only: the
+    // tread's front, not the leak's place.
+    let down = polymap::synth::path::camera_pose(Point3::new(0.07, 0.5, 1.15), 0.0, 90f64.to_radians(), 0.0);
+    map.update(&[seen(&rect(0.0, 0.0, 0.22, 1.0), 0.15, &down)], &down, &sharp(1.2e6, 3e5), None);
+    let area = map.snapshot().polygons[0].area;
+    assert!((area - 0.38).abs() < 1e-4, "a frame that did not look there says nothing of it: area {area}");
+    // A frame that looks at the whole tread and sees no leak there.
     map.update(&[seen(&tread, 0.15, &pose)], &pose, &intr, None);
     let area = map.snapshot().polygons[0].area;
     assert!((area - 0.28).abs() < 1e-4, "the leak seen once is gone: area {area}");
@@ -356,4 +368,45 @@ proptest! {
         let expected = a.unsigned_area() + b.unsigned_area() - a.intersection(&b).unsigned_area();
         prop_assert!((u.unsigned_area() - expected).abs() <= 1e-7 * expected);
     }
+}
+
+#[test]
+fn simplified_shapes_stay_within_the_vertex_budget_however_many_holes_they_have() {
+    use polymap::map::geometry::{largest, simplify_to, vertex_count};
+    // A 1 m square with 40 holes of 4 x 4 cm (each stays a ring of at least 3 vertices
+    // however far it is simplified), 8 slivers of 1 mm x 2 cm and 2 of 2 mm x 0.9 m.
+    let square =
+        |x: f64, y: f64, w: f64, h: f64| LineString::from(vec![(x, y), (x + w, y), (x + w, y + h), (x, y + h), (x, y)]);
+    let mut holes: Vec<LineString<f64>> =
+        (0..40).map(|k| square(0.05 + 0.1 * (k % 8) as f64, 0.05 + 0.15 * (k / 8) as f64, 0.04, 0.04)).collect();
+    holes.extend((0..8).map(|k| square(0.05 + 0.1 * k as f64, 0.85, 0.001, 0.02)));
+    holes.extend((0..2).map(|k| square(0.05, 0.9 + 0.03 * k as f64, 0.9, 0.002)));
+    let s = Shape::new(square(0.0, 0.0, 1.0, 1.0), holes);
+    let simple = simplify_to(&s, 64);
+    assert!(vertex_count(&simple) <= 64, "{} vertices", vertex_count(&simple));
+    assert!(!simple.interiors().is_empty(), "the largest holes that fit stay");
+    // Boolean operations' results keep real holes and drop slivers.
+    let kept = largest(geo::MultiPolygon(vec![s])).unwrap();
+    assert_eq!(kept.interiors().len(), 40, "4 x 4 cm holes are gaps; 1 mm x 2 cm and 2 mm x 0.9 m ones slivers");
+}
+
+#[test]
+fn a_view_pyramid_meets_a_plane_in_what_the_image_shows_of_it() {
+    use polymap::map::geometry::{PlaneFrame, ViewPyramid};
+    // 1 m over the floor looking straight down, a 201 x 101 image at f = 100 px: the image
+    // spans 2 m across (world y) and 1 m along (world x).
+    let pose = polymap::synth::path::camera_pose(Point3::new(0.0, 0.0, 1.0), 0.0, 90f64.to_radians(), 0.0);
+    let intr = Intrinsics { width: 201, height: 101, fx: 100.0, fy: 100.0, cx: 100.0, cy: 50.0, depth_scale: 0.001 };
+    let floor = PlaneFrame::new(Vector3::zeros(), Vector3::z());
+    let seen = ViewPyramid::new(&pose, &intr, 0.0).on_plane(&floor).expect("the floor is in view");
+    assert!((seen.unsigned_area() - 2.0).abs() < 1e-9, "area {}", seen.unsigned_area());
+    let xs = seen.exterior().points().map(|p| p.x());
+    let (x0, x1) = xs.fold((f64::MAX, f64::MIN), |(a, b), x| (a.min(x), b.max(x)));
+    assert!((x0 + 0.5).abs() < 1e-9 && (x1 - 0.5).abs() < 1e-9, "x {x0}..{x1}");
+    // A 10 px margin takes 0.1 m off each side.
+    let inner = ViewPyramid::new(&pose, &intr, 10.0).on_plane(&floor).unwrap();
+    assert!((inner.unsigned_area() - 1.8 * 0.8).abs() < 1e-9, "area {}", inner.unsigned_area());
+    // A ceiling over the camera is behind it: not in view.
+    let ceiling = PlaneFrame::new(Vector3::new(0.0, 0.0, 2.0), Vector3::z());
+    assert!(ViewPyramid::new(&pose, &intr, 0.0).on_plane(&ceiling).is_none());
 }

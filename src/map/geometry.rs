@@ -3,7 +3,10 @@
 //! shapes go back to 3-D by moving each point along the frame's normal onto the current plane.
 
 use geo::{Area, BooleanOps, BoundingRect, Coord, LineString, MultiPolygon, Polygon as Shape, Simplify};
-use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use nalgebra::{Isometry3, Matrix3, SymmetricEigen, Vector3};
+
+use crate::extract::trim::clip_ring;
+use crate::types::Intrinsics;
 use serde::{Deserialize, Serialize};
 
 /// A plane n . p + d = 0 with unit n.
@@ -142,9 +145,24 @@ pub fn vertex_count(s: &Shape<f64>) -> usize {
     std::iter::once(s.exterior()).chain(s.interiors()).map(|r| r.0.len().saturating_sub(1)).sum()
 }
 
-/// The largest part of a union or buffer (slivers from round-off are dropped).
+/// Holes smaller than this, or thinner than `SLIVER_HOLE_M`, are slivers that boolean
+/// operations leave between nearly coincident outlines, not surface gaps (the extractor
+/// keeps no hole under `min_polygon_area_m2`, 0.01 m^2 by default), m^2.
+const SLIVER_HOLE_M2: f64 = 1e-3;
+const SLIVER_HOLE_M: f64 = 0.005;
+
+/// The largest part of a union or buffer, without sliver holes (parts and holes from
+/// round-off are dropped).
 pub fn largest(mp: MultiPolygon<f64>) -> Option<Shape<f64>> {
-    mp.0.into_iter().max_by(|a, b| a.unsigned_area().total_cmp(&b.unsigned_area()))
+    let s = mp.0.into_iter().max_by(|a, b| a.unsigned_area().total_cmp(&b.unsigned_area()))?;
+    let (outline, holes) = s.into_inner();
+    let is_gap = |h: &LineString<f64>| {
+        let area = Shape::new(h.clone(), vec![]).unsigned_area();
+        let perimeter: f64 = h.lines().map(|l| (l.end.x - l.start.x).hypot(l.end.y - l.start.y)).sum();
+        // A thin hole's width is about twice its area over its perimeter.
+        area >= SLIVER_HOLE_M2 && 2.0 * area >= SLIVER_HOLE_M * perimeter
+    };
+    Some(Shape::new(outline, holes.into_iter().filter(is_gap).collect()))
 }
 
 /// A ring of 3-D points on or near `frame`'s plane in 2-D, each vertex moved `d[i]` into
@@ -179,6 +197,66 @@ pub fn inset_ring(frame: &PlaneFrame, ring: &[[f64; 3]], d: &[f64], outline: boo
     LineString::from(moved)
 }
 
+/// The space a camera looked into: the pyramid through its image's corners, pulled in
+/// by a margin (world frame).
+#[derive(Clone, Copy, Debug)]
+pub struct ViewPyramid {
+    apex: Vector3<f64>,
+    /// Inward normals of the four side planes (all through the apex) and the optical axis.
+    inward: [Vector3<f64>; 5],
+}
+
+/// The farthest a view pyramid reaches on a plane, m (the L515 ranges to 9 m).
+const VIEW_REACH_M: f64 = 10.0;
+/// A point nearer the camera than this, along its axis, is not in view, m.
+const VIEW_NEAR_M: f64 = 0.05;
+
+impl ViewPyramid {
+    pub fn new(t_world_camera: &Isometry3<f64>, intr: &Intrinsics, margin_px: f64) -> ViewPyramid {
+        let (u0, v0) = (margin_px, margin_px);
+        let (u1, v1) = (intr.width as f64 - 1.0 - margin_px, intr.height as f64 - 1.0 - margin_px);
+        let corners = [intr.ray(u0, v0), intr.ray(u1, v0), intr.ray(u1, v1), intr.ray(u0, v1)];
+        let axis = Vector3::z();
+        let side = |a: &Vector3<f64>, b: &Vector3<f64>| {
+            let n = a.cross(b);
+            if n.dot(&axis) < 0.0 { -n } else { n }
+        };
+        let r = t_world_camera.rotation;
+        let inward = [
+            r * side(&corners[0], &corners[1]),
+            r * side(&corners[1], &corners[2]),
+            r * side(&corners[2], &corners[3]),
+            r * side(&corners[3], &corners[0]),
+            r * axis,
+        ];
+        ViewPyramid { apex: t_world_camera.translation.vector, inward }
+    }
+
+    /// Where the pyramid meets `frame`'s plane (within `VIEW_REACH_M` of the apex's foot),
+    /// in the frame's 2-D coordinates; None where it misses.
+    pub fn on_plane(&self, frame: &PlaneFrame) -> Option<Shape<f64>> {
+        let foot = frame.to_2d(&[self.apex.x, self.apex.y, self.apex.z]);
+        let r = VIEW_REACH_M;
+        let mut ring: Vec<[f64; 3]> =
+            [(-r, -r), (r, -r), (r, r), (-r, r)].iter().map(|&(x, y)| [foot.x + x, foot.y + y, 0.0]).collect();
+        // Each half-space n . (X - apex) >= near, with X = origin + e1 x + e2 y on the plane.
+        for (i, n) in self.inward.iter().enumerate() {
+            let near = if i == 4 { VIEW_NEAR_M } else { 0.0 };
+            let (a, b, c) = (n.dot(&frame.e1), n.dot(&frame.e2), n.dot(&(frame.origin - self.apex)) - near);
+            ring = clip_ring(&ring, |p| a * p[0] + b * p[1] + c);
+            if ring.len() < 3 {
+                return None;
+            }
+        }
+        Some(Shape::new(LineString::from(ring.iter().map(|p| Coord { x: p[0], y: p[1] }).collect::<Vec<_>>()), vec![]))
+    }
+}
+
+/// `a` without `b`, keeping the largest part.
+pub fn difference(a: &Shape<f64>, b: &MultiPolygon<f64>) -> Option<Shape<f64>> {
+    largest(a.difference(b)).filter(|s| s.unsigned_area() > 0.0)
+}
+
 /// Union of two shapes, keeping the largest connected part.
 pub fn union(a: &Shape<f64>, b: &Shape<f64>) -> Option<Shape<f64>> {
     largest(a.union(b))
@@ -211,6 +289,22 @@ pub fn simplify_to(s: &Shape<f64>, max_vertices: usize) -> Shape<f64> {
         let interiors: Vec<LineString<f64>> = out.interiors().iter().filter(|r| r.0.len() >= 4).cloned().collect();
         out = Shape::new(out.exterior().clone(), interiors);
         eps *= 1.5;
+    }
+    // Holes simplify to no fewer than three vertices each: the smallest go until it fits.
+    if vertex_count(&out) > max_vertices {
+        let (outline, mut holes) = out.into_inner();
+        holes.sort_by(|a, b| {
+            let area = |r: &LineString<f64>| Shape::new(r.clone(), vec![]).unsigned_area();
+            area(b).total_cmp(&area(a))
+        });
+        let mut room = max_vertices.saturating_sub(outline.0.len().saturating_sub(1));
+        holes.retain(|h| {
+            let n = h.0.len().saturating_sub(1);
+            let fits = n <= room;
+            room = room.saturating_sub(n);
+            fits
+        });
+        out = Shape::new(outline, holes);
     }
     out
 }

@@ -17,7 +17,7 @@ pub mod render;
 
 use std::collections::BTreeMap;
 
-use geo::{Area, Centroid, Contains, Coord, MinimumRotatedRect, Point, Polygon as Shape};
+use geo::{Area, BooleanOps, Centroid, Contains, Coord, MinimumRotatedRect, Point, Polygon as Shape};
 use nalgebra::{Isometry3, Point3, Translation3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -25,7 +25,7 @@ use crate::config::MapConfig;
 use crate::extract::{Grid, Polygon};
 use crate::types::Intrinsics;
 use drift::DriftFilter;
-use geometry::{Moments, Plane, PlaneFrame};
+use geometry::{Moments, Plane, PlaneFrame, ViewPyramid};
 pub use labels::{Label, Stair};
 
 /// One map polygon as planners get it (world frame, metres).
@@ -112,8 +112,9 @@ struct Entry {
     samples: Vec<Coord<f64>>,
     /// The planner's view, built when asked for and dropped when the entry changes.
     published: Option<MapPolygon>,
-    /// In `frame`: what any frame saw, what two frames saw, and the latest frame's view;
-    /// `shape` is the union of the last two.
+    /// In `frame`: what frames saw (less what a later frame looked at and did not see),
+    /// what two frames saw, and the latest frame's view as seen; `shape` is the union of
+    /// the first and the last.
     seen: Option<Shape<f64>>,
     confirmed: Option<Shape<f64>>,
     latest: Option<Shape<f64>>,
@@ -127,10 +128,12 @@ struct Observation {
     moments: Moments,
     aabb: [[f64; 3]; 2],
     horizontal: bool,
-    /// How far each vertex of its outline (then of each hole) is pulled in before it joins
-    /// a map shape, m: its outline's uncertainty where that vertex was seen.
+    /// How far each vertex of its outline (then of each hole) is pulled in before what it
+    /// bounds is kept, m: its outline's uncertainty where that vertex was seen.
     erode: Vec<f64>,
     erode_holes: Vec<Vec<f64>>,
+    /// Where its frame looked (None: a snapshot, which looked nowhere).
+    view: Option<ViewPyramid>,
 }
 
 impl Observation {
@@ -354,6 +357,7 @@ impl PolygonMap {
         intrinsics: &Intrinsics,
     ) -> Vec<Observation> {
         let t = self.corrected(t_world_camera);
+        let view = ViewPyramid::new(&t, intrinsics, LOOKED_MARGIN_PX);
         let cos_h = self.cfg.horizontal_max_tilt_deg.to_radians().cos();
         polygons
             .iter()
@@ -396,6 +400,7 @@ impl PolygonMap {
                     horizontal,
                     erode,
                     erode_holes,
+                    view: Some(view),
                     boundary: w.boundary,
                     holes: w.holes,
                 }
@@ -465,16 +470,19 @@ impl PolygonMap {
         let max_vertices = self.cfg.max_vertices;
         let e = self.entries.get_mut(&id).expect("matched entries exist");
         if let Some(view) = o.shape_in(&e.frame) {
-            // What two frames saw is confirmed and stays; what only one frame saw shows while
-            // it is the latest view. So one frame's stray overshoot (a leak, a mixed-pixel
-            // fringe) never becomes a lasting part of the map.
+            // What two frames saw is confirmed and stays. What one frame saw stays until a
+            // later frame looks there and does not see it: one frame's stray overshoot (a
+            // leak, a mixed-pixel fringe) goes with the next look, while the far end of a
+            // surface that only one frame reached stays.
             if let Some(twice) = e.seen.as_ref().and_then(|s| geometry::intersection(s, &view)) {
                 e.confirmed = union_into(e.confirmed.take(), twice, max_vertices);
             }
-            e.seen = union_into(e.seen.take(), view.clone(), max_vertices);
-            // The latest view shows as the frame saw it: it is replaced by the next one.
-            e.latest = Some(e.frame.shape(&o.boundary, &o.holes));
-            e.shape = shown(e.confirmed.as_ref(), e.latest.as_ref(), max_vertices).unwrap_or(e.shape.clone());
+            let looked = o.view.and_then(|v| v.on_plane(&e.frame));
+            e.seen = looked_again(e.seen.take(), looked.as_ref(), view, e.confirmed.as_ref(), max_vertices);
+            // Each place shows as the latest frame to look there saw it, not pulled in.
+            let as_seen = e.frame.shape(&o.boundary, &o.holes);
+            e.latest = looked_again(e.latest.take(), looked.as_ref(), as_seen, None, max_vertices);
+            e.shape = shown(e.seen.as_ref(), e.latest.as_ref(), max_vertices).unwrap_or(e.shape.clone());
         }
         refit(e, &o.moments, 1);
     }
@@ -489,7 +497,7 @@ impl PolygonMap {
         let theirs = e.frame.shape(&boundary, &holes);
         e.seen = union_into(e.seen.take(), theirs.clone(), max_vertices);
         e.confirmed = union_into(e.confirmed.take(), theirs, max_vertices);
-        e.shape = shown(e.confirmed.as_ref(), e.latest.as_ref(), max_vertices).unwrap_or(e.shape.clone());
+        e.shape = shown(e.seen.as_ref(), e.latest.as_ref(), max_vertices).unwrap_or(e.shape.clone());
         refit(e, &o.moments, o.observations);
     }
 
@@ -589,6 +597,7 @@ impl PolygonMap {
                 erode_holes: p.holes.iter().map(|h| vec![0.0; h.len()]).collect(),
                 boundary: p.boundary.clone(),
                 holes: p.holes.clone(),
+                view: None,
             };
             map.insert(p.id, &o);
             let e = map.entries.get_mut(&p.id).expect("just inserted");
@@ -611,9 +620,31 @@ fn union_into(acc: Option<Shape<f64>>, more: Shape<f64>, max_vertices: usize) ->
     Some(geometry::simplify_to(&u, max_vertices))
 }
 
-/// The shape a map polygon shows: its confirmed part and the latest frame's view.
-fn shown(confirmed: Option<&Shape<f64>>, latest: Option<&Shape<f64>>, max_vertices: usize) -> Option<Shape<f64>> {
-    let s = match (confirmed, latest) {
+/// `acc` after a frame that looked at `looked` and saw `view`: what it looked at and did not
+/// see is gone (except what `keep` holds), and what it saw is added.
+fn looked_again(
+    acc: Option<Shape<f64>>,
+    looked: Option<&Shape<f64>>,
+    view: Shape<f64>,
+    keep: Option<&Shape<f64>>,
+    max_vertices: usize,
+) -> Option<Shape<f64>> {
+    let acc = match (acc, looked) {
+        (Some(a), Some(looked)) => {
+            let mut missed = looked.difference(&view);
+            if let Some(k) = keep {
+                missed = missed.difference(k);
+            }
+            geometry::difference(&a, &missed)
+        }
+        (acc, _) => acc,
+    };
+    union_into(acc, view, max_vertices)
+}
+
+/// The shape a map polygon shows: what frames saw and the latest frame's view.
+fn shown(seen: Option<&Shape<f64>>, latest: Option<&Shape<f64>>, max_vertices: usize) -> Option<Shape<f64>> {
+    let s = match (seen, latest) {
         (Some(c), Some(l)) => geometry::union(c, l)?,
         (Some(s), None) | (None, Some(s)) => s.clone(),
         (None, None) => return None,
@@ -636,6 +667,9 @@ const OUTLINE_UNCERTAINTY_PX: f64 = 1.5;
 const VIEW_EDGE_UNCERTAINTY_PX: f64 = 4.0;
 /// An outline vertex within this many pixels of the image's border is on it.
 const VIEW_EDGE_PX: f64 = 2.0;
+/// A frame looked at what lies this many pixels inside its image's border: its outlines
+/// along the border are pulled in by less, so missing there is not having looked.
+const LOOKED_MARGIN_PX: f64 = VIEW_EDGE_PX + VIEW_EDGE_UNCERTAINTY_PX + 2.0;
 /// A vertex this near another plane of its frame lies on a cut (the cuts are exact to
 /// rounding), m.
 const ON_CUT_M: f64 = 1e-7;
