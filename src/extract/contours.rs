@@ -71,18 +71,29 @@ fn simplify(pts: &[Point<i32>], tolerance: f64) -> Vec<[f32; 2]> {
 /// The ring with every edge moved `d` pixels away from the ring's inside (d < 0: towards
 /// it). Vertices move along the bisector, the shift capped at 2|d| on sharp corners.
 pub fn offset_ring(ring: &[[f32; 2]], d: f32) -> Vec<[f32; 2]> {
+    if d == 0.0 {
+        return ring.to_vec();
+    }
+    let pts: Vec<[f64; 2]> = ring.iter().map(|p| [p[0] as f64, p[1] as f64]).collect();
+    offset_vertices(&pts, &vec![d as f64; pts.len()]).iter().map(|p| [p[0] as f32, p[1] as f32]).collect()
+}
+
+/// The ring with vertex i moved so that both its edges move `d[i]` away from the ring's
+/// inside (d < 0: towards it), whichever way the ring winds: along the bisector of the
+/// edges' normals, the shift capped at 2|d[i]| on sharp corners.
+pub fn offset_vertices(ring: &[[f64; 2]], d: &[f64]) -> Vec<[f64; 2]> {
     let n = ring.len();
-    if n < 3 || d == 0.0 {
+    if n < 3 {
         return ring.to_vec();
     }
     // Twice the signed area: its sign says which side of each edge is inside.
-    let area2: f32 = (0..n).map(|i| ring[i][0] * ring[(i + 1) % n][1] - ring[(i + 1) % n][0] * ring[i][1]).sum();
+    let area2: f64 = (0..n).map(|i| ring[i][0] * ring[(i + 1) % n][1] - ring[(i + 1) % n][0] * ring[i][1]).sum();
     let side = if area2 > 0.0 { 1.0 } else { -1.0 };
     // Outward unit normal of edge i (from vertex i to i + 1).
     let normal = |i: usize| {
         let (a, b) = (ring[i], ring[(i + 1) % n]);
         let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
-        let len = (ex * ex + ey * ey).sqrt().max(1e-6);
+        let len = ex.hypot(ey).max(1e-12);
         [side * ey / len, -side * ex / len]
     };
     (0..n)
@@ -91,7 +102,7 @@ pub fn offset_ring(ring: &[[f32; 2]], d: f32) -> Vec<[f32; 2]> {
             let (sx, sy) = (a[0] + b[0], a[1] + b[1]);
             let dot = (sx * a[0] + sy * a[1]).max(1e-6);
             // Along the bisector, far enough that both edges move by d.
-            let scale = (d / dot).clamp(-2.0 * d.abs(), 2.0 * d.abs());
+            let scale = (d[i] / dot).clamp(-2.0 * d[i].abs(), 2.0 * d[i].abs());
             [ring[i][0] + sx * scale, ring[i][1] + sy * scale]
         })
         .collect()

@@ -492,13 +492,7 @@ pub fn build_polygons(
             continue;
         }
         let onto_plane = |ring: &[[f32; 2]]| -> Option<Vec<[f64; 3]>> {
-            ring.iter()
-                .map(|&[u, v]| {
-                    let ray = intr.ray(u as f64, v as f64);
-                    let t = -fit.offset / fit.normal.dot(&ray);
-                    (t.is_finite() && t > 0.0).then(|| [ray.x * t, ray.y * t, ray.z * t])
-                })
-                .collect()
+            ring.iter().map(|&[u, v]| ray_cast(&intr.ray(u as f64, v as f64), fit).map(|p| [p.x, p.y, p.z])).collect()
         };
         let Some(mut boundary) = onto_plane(&region.outer) else { continue };
         drop_border_vertices_onto_plane(&mut boundary, &region.outer, region.label, seg, depth, intr, fit);
@@ -530,6 +524,9 @@ pub fn build_polygons(
     out
 }
 
+/// Outline vertices within this many pixels of the image's edge are on its border.
+const BORDER_PX: i64 = 3;
+
 /// Where a region meets the image's border there are no normals to stop its growth, and
 /// its pixels there can be the next surface's first (a riser above a far tread, within the
 /// inlier distance of the tread's plane). Ray-cast onto the plane at a grazing angle they
@@ -537,9 +534,6 @@ pub fn build_polygons(
 /// plane, land where they are. So a border vertex moves by what dropping its pixel's point
 /// instead of ray-casting it changes, when that pulls it towards the polygon's inside (a
 /// pixel of the plane itself moves by its depth noise either way: only shrinking is safe).
-/// Outline vertices within this many pixels of the image's edge are on its border.
-const BORDER_PX: i64 = 3;
-
 fn drop_border_vertices_onto_plane(
     boundary: &mut [[f64; 3]],
     outline_px: &[[f32; 2]],
@@ -571,16 +565,20 @@ fn drop_border_vertices_onto_plane(
         let ray = intr.ray(x as f64, y as f64);
         let measured = ray * depth.data[(y * w + x) as usize] as f64;
         let dropped = measured - fit.normal * (fit.normal.dot(&measured) + fit.offset);
-        let Some(t) = Some(-fit.offset / fit.normal.dot(&ray)).filter(|t| t.is_finite() && *t > 0.0) else {
-            continue;
-        };
-        let shift = dropped - ray * t;
+        let Some(cast) = ray_cast(&ray, fit) else { continue };
+        let shift = dropped - cast;
         let v3 = Vector3::from(*vertex);
         if shift.dot(&(centre - v3)) > 0.0 {
             let moved = v3 + shift;
             *vertex = [moved.x, moved.y, moved.z];
         }
     }
+}
+
+/// Where a camera ray meets a fitted plane in front of the camera.
+fn ray_cast(ray: &Vector3<f64>, fit: &PlaneFit) -> Option<Vector3<f64>> {
+    let t = -fit.offset / fit.normal.dot(ray);
+    (t.is_finite() && t > 0.0).then(|| ray * t)
 }
 
 /// Area of a planar ring, m^2 (Newell's method, magnitude).

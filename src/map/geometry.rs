@@ -5,9 +5,11 @@
 use geo::{Area, BooleanOps, BoundingRect, Coord, LineString, MultiPolygon, Polygon as Shape, Simplify};
 use nalgebra::{Isometry3, Matrix3, SymmetricEigen, Vector3};
 
+use serde::{Deserialize, Serialize};
+
+use crate::extract::contours::offset_vertices;
 use crate::extract::trim::clip_ring;
 use crate::types::Intrinsics;
-use serde::{Deserialize, Serialize};
 
 /// A plane n . p + d = 0 with unit n.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -157,7 +159,7 @@ pub fn largest(mp: MultiPolygon<f64>) -> Option<Shape<f64>> {
     let s = mp.0.into_iter().max_by(|a, b| a.unsigned_area().total_cmp(&b.unsigned_area()))?;
     let (outline, holes) = s.into_inner();
     let is_gap = |h: &LineString<f64>| {
-        let area = Shape::new(h.clone(), vec![]).unsigned_area();
+        let area = ring_area(h);
         let perimeter: f64 = h.lines().map(|l| (l.end.x - l.start.x).hypot(l.end.y - l.start.y)).sum();
         // A thin hole's width is about twice its area over its perimeter.
         area >= SLIVER_HOLE_M2 && 2.0 * area >= SLIVER_HOLE_M * perimeter
@@ -166,35 +168,18 @@ pub fn largest(mp: MultiPolygon<f64>) -> Option<Shape<f64>> {
 }
 
 /// A ring of 3-D points on or near `frame`'s plane in 2-D, each vertex moved `d[i]` into
-/// the material: inwards for an outline, out of the hole for a hole. A vertex moves along
-/// the bisector of its edges' normals, far enough that both edges move by its d (at most
-/// twice d, on sharp corners).
+/// the material: inwards for an outline, out of the hole for a hole (at most twice d, on
+/// sharp corners).
 pub fn inset_ring(frame: &PlaneFrame, ring: &[[f64; 3]], d: &[f64], outline: bool) -> LineString<f64> {
-    let mut pts: Vec<Coord<f64>> = ring.iter().map(|p| frame.to_2d(p)).collect();
-    let mut d = d.to_vec();
-    let n = pts.len();
-    let area2: f64 = (0..n).map(|i| pts[i].x * pts[(i + 1) % n].y - pts[(i + 1) % n].x * pts[i].y).sum();
-    // Counter-clockwise outlines and clockwise holes have the material on their left.
-    if (area2 > 0.0) != outline {
-        pts.reverse();
-        d.reverse();
-    }
-    let left = |i: usize| {
-        let (a, b) = (pts[i], pts[(i + 1) % n]);
-        let (ex, ey) = (b.x - a.x, b.y - a.y);
-        let len = ex.hypot(ey).max(1e-12);
-        Coord { x: -ey / len, y: ex / len }
-    };
-    let moved: Vec<Coord<f64>> = (0..n)
-        .map(|i| {
-            let (a, b) = (left((i + n - 1) % n), left(i));
-            let s = Coord { x: a.x + b.x, y: a.y + b.y };
-            let dot = (s.x * a.x + s.y * a.y).max(1e-6);
-            let scale = (d[i] / dot).min(2.0 * d[i]);
-            Coord { x: pts[i].x + s.x * scale, y: pts[i].y + s.y * scale }
-        })
-        .collect();
-    LineString::from(moved)
+    let pts: Vec<[f64; 2]> = ring.iter().map(|p| frame.to_2d(p)).map(|c| [c.x, c.y]).collect();
+    // An outline's material is its inside; a hole's is outside it.
+    let away: Vec<f64> = d.iter().map(|&d| if outline { -d } else { d }).collect();
+    LineString::from(offset_vertices(&pts, &away).into_iter().map(|[x, y]| Coord { x, y }).collect::<Vec<_>>())
+}
+
+/// Area enclosed by a ring, m^2 (shoelace).
+fn ring_area(r: &LineString<f64>) -> f64 {
+    r.lines().map(|l| l.start.x * l.end.y - l.end.x * l.start.y).sum::<f64>().abs() / 2.0
 }
 
 /// The space a camera looked into: the pyramid through its image's corners, pulled in
@@ -293,10 +278,7 @@ pub fn simplify_to(s: &Shape<f64>, max_vertices: usize) -> Shape<f64> {
     // Holes simplify to no fewer than three vertices each: the smallest go until it fits.
     if vertex_count(&out) > max_vertices {
         let (outline, mut holes) = out.into_inner();
-        holes.sort_by(|a, b| {
-            let area = |r: &LineString<f64>| Shape::new(r.clone(), vec![]).unsigned_area();
-            area(b).total_cmp(&area(a))
-        });
+        holes.sort_by(|a, b| ring_area(b).total_cmp(&ring_area(a)));
         let mut room = max_vertices.saturating_sub(outline.0.len().saturating_sub(1));
         holes.retain(|h| {
             let n = h.0.len().saturating_sub(1);
