@@ -1,55 +1,111 @@
 #!/usr/bin/env bash
-# Makes librealsense2 2.56.5 available to `cargo build --features realsense` on a machine
-# where it is not installed (CI, a laptop). On the robot, install Intel's librealsense2
-# packages instead (README: "On the robot") and skip this.
-#
-# librealsense2 is not a Debian package, but the PyPI wheel pyrealsense2==2.56.5.9235,
-# which matches realsense-sys 2.56.5, carries the whole library inside its extension
-# module: that module exports the rs2_* C API. We install the wheel into the project's
-# virtualenv (its Python API also writes the test bags), then turn a copy of the module
-# into librealsense2.so.2.56 with a pkg-config file beside it.
+# Makes librealsense2 2.54.x available to `cargo build --features realsense` (realsense-sys
+# 2.54.3 links against it; 2.55 and later dropped the L515). In order:
+#   1. a librealsense2 2.54.x installed on the system, as pkg-config finds it (what a robot
+#      owner has after README "On the robot"): used as it is;
+#   2. else librealsense 2.54.2 taken from the pyrealsense2==2.54.2.5684 wheel, whose
+#      extension module carries the whole library and exports its rs2_* C API: the wheel
+#      for VENV's Python version when PyPI has one, else the newest older CPython's (the
+#      release has wheels up to some version and none after it). The module is never
+#      imported, so the Python version only picks a file;
+#   3. else it stops, saying what to install.
 #
 # Usage: source scripts/librealsense.sh VENV
-#   exports PKG_CONFIG_PATH and LD_LIBRARY_PATH so cargo finds and the tests load it.
-# Sourced, so it leaves shell options to its caller (scripts/test.sh runs with set -euo
-# pipefail, which stops at any failure here too).
+#   VENV's pip downloads the wheel. Exports PKG_CONFIG_PATH and LD_LIBRARY_PATH so cargo
+#   finds the library and the tests load it. Sourced, so it leaves shell options to its
+#   caller (scripts/test.sh runs with set -euo pipefail).
 
 venv="$1"
 lib_dir="$PWD/target/librealsense"
-wheel_version=2.56.5.9235
+series=2.54
+wheel_version=2.54.2.5684
 
-# Found without importing it: importing needs libusb, which is not this script's business.
-module_dir=$("$venv/bin/python" -c \
-    "import importlib.util as u; s = u.find_spec('pyrealsense2'); print(s.submodule_search_locations[0] if s else '')")
-if [ -z "$module_dir" ]; then
-    echo "installing pyrealsense2==$wheel_version into $venv"
-    # numpy and pillow: scripts/make_bag.py reads the sequences' PNGs with them.
-    "$venv/bin/pip" install -q --disable-pip-version-check "pyrealsense2==$wheel_version" numpy==2.4.6 pillow==13.0.0
-    module_dir=$("$venv/bin/python" -c \
-        "import importlib.util as u; print(u.find_spec('pyrealsense2').submodule_search_locations[0])")
-fi
+librealsense_from_system() {
+    local found
+    found=$(pkg-config --modversion realsense2 2>/dev/null) || return 1
+    case "$found" in
+        "$series".*) echo "using the system's librealsense2 $found" ;;
+        *) echo "the system's librealsense2 is $found, not $series.x: using $wheel_version's from its wheel instead"; return 1 ;;
+    esac
+}
 
-if [ ! -f "$lib_dir/realsense2.pc" ] || [ ! -f "$lib_dir/librealsense2.so.2.56" ]; then
-    echo "making $lib_dir/librealsense2.so from the pyrealsense2 wheel"
-    mkdir -p "$lib_dir"
-    cp "$module_dir"/pyrealsense2.cpython-*.so "$lib_dir/librealsense2.so.2.56"
+# The pyrealsense2 wheel for CPython MAJOR.MINOR, downloaded into $1; fails when PyPI has none.
+download_wheel() {
+    local into="$1" version="$2"
+    "$venv/bin/pip" download -q --disable-pip-version-check --no-deps --only-binary=:all: \
+        --python-version "$version" --platform "manylinux1_$(uname -m)" \
+        -d "$into" "pyrealsense2==$wheel_version" >/dev/null 2>&1
+}
+
+# Tries VENV's Python version, then each older minor down to 3.6 (the oldest the
+# release was built for). Prints the version whose wheel it got.
+fetch_wheel() {
+    local into="$1" major minor
+    read -r major minor < <("$venv/bin/python" -c 'import sys; print(*sys.version_info[:2])')
+    while [ "$minor" -ge 6 ]; do
+        if download_wheel "$into" "$major.$minor"; then
+            echo "$major.$minor"
+            return 0
+        fi
+        minor=$((minor - 1))
+    done
+    return 1
+}
+
+# librealsense2.so.2.54 from the wheel's module. The module leaves Python's C API to the
+# interpreter that imports it; no interpreter loads it here and nothing calls those
+# functions, so a small library defining the names it refers to stands in for libpython
+# (which would tie the tests to one Python version).
+library_from_wheel() {
+    local wheel_dir="$lib_dir/wheel" cpython module
+    mkdir -p "$wheel_dir"
+    if ! ls "$wheel_dir"/pyrealsense2-"$wheel_version"-*.whl >/dev/null 2>&1; then
+        cpython=$(fetch_wheel "$wheel_dir") || {
+            echo "error: librealsense $series is needed (cargo test --features realsense links it), and" >&2
+            echo "  no pyrealsense2==$wheel_version wheel could be downloaded for $(uname -m) (CPython 3.6 to" >&2
+            echo "  $("$venv/bin/python" -c 'import sys; print("%d.%d" % sys.version_info[:2])')). Install librealsense 2.54.2 as README \"On the robot\" says" >&2
+            echo "  (pkg-config realsense2 must then report 2.54.x), or give this machine access to PyPI." >&2
+            return 1
+        }
+        echo "downloaded pyrealsense2==$wheel_version for CPython $cpython"
+    fi
+    echo "making $lib_dir/librealsense2.so.$series from the pyrealsense2 wheel"
+    "$venv/bin/python" - "$wheel_dir" "$lib_dir/librealsense2.so.$series" <<'EOF'
+import pathlib, sys, zipfile
+wheel = next(pathlib.Path(sys.argv[1]).glob("pyrealsense2-*.whl"))
+with zipfile.ZipFile(wheel) as z:
+    name = next(n for n in z.namelist() if n.startswith("pyrealsense2/pyrealsense2.") and n.endswith(".so"))
+    pathlib.Path(sys.argv[2]).write_bytes(z.read(name))
+EOF
+    module="$lib_dir/librealsense2.so.$series"
+    {
+        echo "/* The Python C API names librealsense2.so.$series (from a pyrealsense2 wheel) refers to."
+        echo "   Never called: nothing here runs Python. Generated by scripts/librealsense.sh. */"
+        nm -D --undefined-only "$module" | awk '$1 == "U" && $2 ~ /^_?Py/ { printf "char %s[64] __attribute__((aligned(16)));\n", $2 }'
+    } >"$lib_dir/python_names.c"
+    cc -shared -fPIC -Wl,-soname,libpolymap_python_names.so -o "$lib_dir/libpolymap_python_names.so" "$lib_dir/python_names.c"
     # Two separate patchelf calls: done in one, the SONAME came out corrupted.
-    patchelf --set-soname librealsense2.so.2.56 "$lib_dir/librealsense2.so.2.56"
-    # The module leaves the Python C API symbols to its host interpreter; a Rust binary
-    # has none, so the library must pull libpython in itself.
-    patchelf --add-needed libpython3.11.so.1.0 "$lib_dir/librealsense2.so.2.56"
-    ln -sf librealsense2.so.2.56 "$lib_dir/librealsense2.so"
+    patchelf --set-soname "librealsense2.so.$series" "$module"
+    patchelf --add-needed libpolymap_python_names.so "$module"
+    # Finds that library beside itself, wherever the two are loaded from.
+    patchelf --set-rpath '$ORIGIN' "$module"
+    ln -sf "librealsense2.so.$series" "$lib_dir/librealsense2.so"
     cat >"$lib_dir/realsense2.pc" <<EOF
 libdir=$lib_dir
 includedir=$lib_dir/include
 
 Name: realsense2
 Description: Intel RealSense SDK 2.0, from the pyrealsense2 $wheel_version wheel
-Version: 2.56.5
+Version: ${wheel_version%.*}
 Libs: -L\${libdir} -lrealsense2
 Cflags: -I\${includedir}
 EOF
-fi
+}
 
-export PKG_CONFIG_PATH="$lib_dir${PKG_CONFIG_PATH:+:$PKG_CONFIG_PATH}"
-export LD_LIBRARY_PATH="$lib_dir${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+if ! librealsense_from_system; then
+    if [ ! -f "$lib_dir/realsense2.pc" ] || [ ! -f "$lib_dir/librealsense2.so.$series" ]; then
+        library_from_wheel
+    fi
+    export PKG_CONFIG_PATH="$lib_dir${PKG_CONFIG_PATH:+:$PKG_CONFIG_PATH}"
+    export LD_LIBRARY_PATH="$lib_dir${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+fi

@@ -2,8 +2,9 @@
 # Runs polymap's whole test suite on a fresh Debian/Ubuntu machine with Rust.
 # Installs what the tests need first: Mesa's software Vulkan (lavapipe) so the wgpu
 # pipeline runs where there is no GPU; a Python virtualenv for the Python client tests;
-# librealsense2 from the pyrealsense2 wheel, so the `realsense` feature builds, links and
-# plays bags here (scripts/librealsense.sh).
+# librealsense2 2.54 (the system's, or from the pyrealsense2 wheel), so the `realsense`
+# feature builds, links and plays bags here (scripts/librealsense.sh). Works with whatever
+# python3 the machine has (Debian 12, Ubuntu 22.04 and 24.04).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -16,7 +17,7 @@ need_debs() {
     $sudo apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 }
-need_debs mesa-vulkan-drivers libvulkan1 python3-venv patchelf libusb-1.0-0 libpython3.11
+need_debs mesa-vulkan-drivers libvulkan1 python3-venv pkg-config patchelf binutils libusb-1.0-0 libudev1
 
 # The Python client test: eclipse-zenoh and rosbags from PyPI in a virtualenv of our own.
 venv=target/pyenv

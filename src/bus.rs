@@ -58,7 +58,7 @@ pub async fn subscribe_poses(
 /// Returns how many samples went out once the sender side closes.
 pub async fn publish_d435i(
     session: &zenoh::Session,
-    prefix: &str,
+    cfg: &crate::config::D435iConfig,
     mut samples: tokio::sync::mpsc::Receiver<crate::camera::D435iSample>,
 ) -> Result<u64> {
     use crate::camera::D435iSample;
@@ -67,6 +67,7 @@ pub async fn publish_d435i(
     let put = |key: String, bytes: Vec<u8>| async move {
         session.put(&key, bytes).await.map_err(|e| anyhow!("publishing on {key}: {e}"))
     };
+    let prefix = &cfg.key_prefix;
     let mut sent = 0;
     while let Some(sample) = samples.recv().await {
         match sample {
@@ -76,7 +77,10 @@ pub async fn publish_d435i(
                 put(format!("{prefix}/infra{index}/camera_info"), ros::encode(&info)).await?;
                 put(format!("{prefix}/infra{index}/image_rect_raw"), ros::encode(&image)).await?;
             }
-            D435iSample::Imu(s) => put(format!("{prefix}/imu"), ros::encode(&ros::imu(&s))).await?,
+            D435iSample::Imu(s) => {
+                let msg = ros::imu(&s, cfg.angular_velocity_cov, cfg.linear_accel_cov);
+                put(format!("{prefix}/imu"), ros::encode(&msg)).await?
+            }
         }
         sent += 1;
     }

@@ -5,9 +5,12 @@
 //! Unknown keys are rejected, and a bad value stops start-up with the file, the
 //! dotted key and the reason.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+
+use crate::camera::CamOption;
 
 /// A configuration problem: which file, which key, why.
 #[derive(Debug, thiserror::Error)]
@@ -63,61 +66,86 @@ pub struct DepthSourceConfig {
     pub width: u32,
     pub height: u32,
     pub fps: u32,
-    /// L515 options, named as realsense-ros names them; unset = the camera's own value.
+    /// L515 options; unset = the camera's own value.
     pub options: L515Options,
 }
 
-/// The L515 options its users tune. Ranges are the L515's (librealsense 2.56).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct L515Options {
-    /// 0 custom, 1 default, 2 no ambient light, 3 low ambient light, 4 max range, 5 short range.
-    pub visual_preset: Option<f32>,
-    /// Laser power, 0..=100 %.
-    pub laser_power: Option<f32>,
-    /// Confidence threshold, 0..=3.
-    pub confidence_threshold: Option<f32>,
-    /// Pre-processing sharpening, 0..=5.
-    pub pre_processing_sharpening: Option<f32>,
-    /// Receiver gain (librealsense digital gain): 0 auto, 1 high, 2 low.
-    pub receiver_gain: Option<f32>,
-    /// Minimum distance, mm, 0..=2000 (nearer returns are dropped).
-    pub min_distance: Option<f32>,
-}
+/// The L515 options to set; the others keep the camera's own values. Keys are librealsense's
+/// option names (`laser_power`) or realsense-ros's parameter names (`depth_module.laser_power`,
+/// which TOML reads as a `depth_module` table), so values can be pasted from a realsense-ros
+/// launch file. Applied in [`CamOption`]'s order: the visual preset first, since it resets
+/// the others.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct L515Options(pub BTreeMap<CamOption, f32>);
 
 impl L515Options {
-    /// The options that are set, in the order they are applied (the preset first: it
-    /// resets the others).
-    pub fn as_list(&self) -> Vec<(crate::camera::CamOption, f32)> {
-        use crate::camera::CamOption as O;
-        [
-            (O::VisualPreset, self.visual_preset),
-            (O::LaserPower, self.laser_power),
-            (O::ConfidenceThreshold, self.confidence_threshold),
-            (O::PreProcessingSharpening, self.pre_processing_sharpening),
-            (O::ReceiverGain, self.receiver_gain),
-            (O::MinDistance, self.min_distance),
-        ]
-        .into_iter()
-        .filter_map(|(o, v)| v.map(|v| (o, v)))
-        .collect()
+    /// The options that are set, in the order they are applied.
+    pub fn as_list(&self) -> Vec<(CamOption, f32)> {
+        self.0.iter().map(|(&o, &v)| (o, v)).collect()
     }
 
-    fn validate(&self) -> Result<(), (&'static str, String)> {
-        let ranges = [
-            ("sources.depth.options.visual_preset", self.visual_preset, 0.0, 5.0),
-            ("sources.depth.options.laser_power", self.laser_power, 0.0, 100.0),
-            ("sources.depth.options.confidence_threshold", self.confidence_threshold, 0.0, 3.0),
-            ("sources.depth.options.pre_processing_sharpening", self.pre_processing_sharpening, 0.0, 5.0),
-            ("sources.depth.options.receiver_gain", self.receiver_gain, 0.0, 2.0),
-            ("sources.depth.options.min_distance", self.min_distance, 0.0, 2000.0),
-        ];
-        for (key, v, lo, hi) in ranges {
-            if let Some(v) = v {
-                check_range(key, v as f64, lo, hi)?;
+    fn validate(&self) -> Result<(), Invalid> {
+        for (&option, &v) in &self.0 {
+            let key = format!("sources.depth.options.{}", option.name());
+            let (lo, hi, meaning) = option.l515_range();
+            if option == CamOption::ReceiverGain && v.is_finite() && v < lo {
+                return Err((
+                    key,
+                    format!(
+                        "{v}: librealsense's \"Receiver Gain\" is the L515's APD gain ({lo}..{hi}); \
+                         for the digital gain (0 auto, 1 high, 2 low), which polymap once called receiver_gain, \
+                         set digital_gain = {v}"
+                    ),
+                ));
+            }
+            if !(v.is_finite() && (lo..=hi).contains(&v)) {
+                let meaning = if meaning.is_empty() { String::new() } else { format!(" ({meaning})") };
+                return Err((key, format!("{v} must be within [{lo}, {hi}]{meaning}")));
             }
         }
         Ok(())
+    }
+}
+
+impl Serialize for L515Options {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_map(self.0.iter().map(|(o, v)| (o.name(), v)))
+    }
+}
+
+impl<'de> Deserialize<'de> for L515Options {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Options;
+        impl<'de> serde::de::Visitor<'de> for Options {
+            type Value = L515Options;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a table of L515 options, e.g. laser_power = 100")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<L515Options, A::Error> {
+                use serde::de::Error;
+                let mut out = BTreeMap::new();
+                let mut set = |option: CamOption, value: f32, key: &str| match out.insert(option, value) {
+                    None => Ok(()),
+                    Some(_) => Err(A::Error::custom(format!("{} is set twice (again as {key})", option.name()))),
+                };
+                while let Some(key) = map.next_key::<String>()? {
+                    if key == "depth_module" {
+                        for (option, value) in map.next_value::<L515Options>()?.0 {
+                            set(option, value, &format!("depth_module.{}", option.name()))?;
+                        }
+                        continue;
+                    }
+                    let name = key.strip_prefix("depth_module.").unwrap_or(&key);
+                    let option = CamOption::l515_by_name(name).ok_or_else(|| {
+                        let known: Vec<_> = CamOption::L515.iter().map(|o| o.name()).collect();
+                        A::Error::custom(format!("unknown L515 option {key:?}; known: {}", known.join(", ")))
+                    })?;
+                    set(option, map.next_value()?, &key)?;
+                }
+                Ok(L515Options(out))
+            }
+        }
+        d.deserialize_map(Options)
     }
 }
 
@@ -160,6 +188,10 @@ pub struct D435iConfig {
     /// IMU rates, Hz (D435i: gyro 200 or 400, accel 63 or 250).
     pub gyro_hz: u32,
     pub accel_hz: u32,
+    /// Variances on the diagonal of the published Imu's covariances, (rad/s)^2 and (m/s^2)^2:
+    /// realsense-ros's `angular_velocity_cov` and `linear_accel_cov`, with its defaults.
+    pub angular_velocity_cov: f64,
+    pub linear_accel_cov: f64,
     /// Zenoh keys of the IR images, camera infos and IMU: realsense-ros's topic names
     /// (`/camera/camera/imu`) as zenoh-bridge-ros2dds maps them (`camera/camera/imu`).
     pub key_prefix: String,
@@ -175,6 +207,8 @@ impl Default for D435iConfig {
             ir_fps: 30,
             gyro_hz: 200,
             accel_hz: 250,
+            angular_velocity_cov: 0.01,
+            linear_accel_cov: 0.01,
             key_prefix: "camera/camera".into(),
         }
     }
@@ -373,19 +407,22 @@ impl Config {
             let key = e.path().to_string();
             fail(if key == "." { "(top level)".into() } else { key }, one_line(&e.into_inner().to_string()))
         })?;
-        config.validate().map_err(|(key, reason)| fail(key.into(), reason))?;
+        config.validate().map_err(|(key, reason)| fail(key, reason))?;
         Ok(config)
     }
 
     /// The first impossible value, as (dotted key, reason).
-    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+    pub fn validate(&self) -> Result<(), Invalid> {
         let d = &self.sources.depth;
         let needs_sequence = matches!(d.kind, DepthSourceKind::Mock | DepthSourceKind::Sequence);
         if needs_sequence && d.sequence.as_os_str().is_empty() {
-            return Err(("sources.depth.sequence", "a mock or sequence source needs a sequence directory".into()));
+            return Err((
+                "sources.depth.sequence".into(),
+                "a mock or sequence source needs a sequence directory".into(),
+            ));
         }
         if d.kind == DepthSourceKind::Bag && d.bag.as_os_str().is_empty() {
-            return Err(("sources.depth.bag", "kind = \"bag\" needs the path of a .bag recording".into()));
+            return Err(("sources.depth.bag".into(), "kind = \"bag\" needs the path of a .bag recording".into()));
         }
         d.options.validate()?;
         check_range("sources.depth.width", d.width as f64, 16.0, 4096.0)?;
@@ -397,14 +434,16 @@ impl Config {
         check_range("sources.d435i.ir_fps", i.ir_fps as f64, 1.0, 1000.0)?;
         check_range("sources.d435i.gyro_hz", i.gyro_hz as f64, 1.0, 2000.0)?;
         check_range("sources.d435i.accel_hz", i.accel_hz as f64, 1.0, 2000.0)?;
+        check_range("sources.d435i.angular_velocity_cov", i.angular_velocity_cov, 0.0, 1e3)?;
+        check_range("sources.d435i.linear_accel_cov", i.linear_accel_cov, 0.0, 1e3)?;
         let e = &self.sources.extrinsics;
         if e.xyz.iter().any(|v| !v.is_finite()) {
-            return Err(("sources.extrinsics.xyz", format!("{:?} must be finite metres", e.xyz)));
+            return Err(("sources.extrinsics.xyz".into(), format!("{:?} must be finite metres", e.xyz)));
         }
         let qn = e.quat_xyzw.iter().map(|v| v * v).sum::<f64>().sqrt();
         if !((qn - 1.0).abs() <= crate::sequence::QUATERNION_NORM_TOLERANCE) {
             return Err((
-                "sources.extrinsics.quat_xyzw",
+                "sources.extrinsics.quat_xyzw".into(),
                 format!("norm {qn:.6}, a rotation quaternion must have norm 1"),
             ));
         }
@@ -414,24 +453,27 @@ impl Config {
         check_positive("pipeline.diffusion_kappa_m", p.diffusion_kappa_m)?;
         if !(p.diffusion_gamma > 0.0 && p.diffusion_gamma <= 0.25) {
             return Err((
-                "pipeline.diffusion_gamma",
+                "pipeline.diffusion_gamma".into(),
                 format!("{} must be in (0, 0.25]: larger steps make 4-neighbour diffusion unstable", p.diffusion_gamma),
             ));
         }
         if ![3, 5, 7].contains(&p.normal_kernel) {
-            return Err(("pipeline.normal_kernel", format!("{} must be 3, 5 or 7", p.normal_kernel)));
+            return Err(("pipeline.normal_kernel".into(), format!("{} must be 3, 5 or 7", p.normal_kernel)));
         }
         check_positive("pipeline.canny_low", p.canny_low)?;
         check_positive("pipeline.canny_high", p.canny_high)?;
         if p.canny_low > p.canny_high {
             return Err((
-                "pipeline.canny_low",
+                "pipeline.canny_low".into(),
                 format!("{} must not exceed canny_high = {}", p.canny_low, p.canny_high),
             ));
         }
         check_positive("pipeline.depth_edge_ratio", p.depth_edge_ratio)?;
         if p.closing_kernel_px % 2 == 0 || p.closing_kernel_px > 63 {
-            return Err(("pipeline.closing_kernel_px", format!("{} must be odd and at most 63", p.closing_kernel_px)));
+            return Err((
+                "pipeline.closing_kernel_px".into(),
+                format!("{} must be odd and at most 63", p.closing_kernel_px),
+            ));
         }
         check_positive("pipeline.min_polygon_area_m2", p.min_polygon_area_m2)?;
         check_positive("pipeline.simplify_tolerance_px", p.simplify_tolerance_px)?;
@@ -455,7 +497,7 @@ impl Config {
         check_positive("map.snapshot_period_s", m.snapshot_period_s)?;
         if m.horizontal_max_tilt_deg >= m.vertical_min_tilt_deg {
             return Err((
-                "map.horizontal_max_tilt_deg",
+                "map.horizontal_max_tilt_deg".into(),
                 format!(
                     "{} must be below vertical_min_tilt_deg = {}",
                     m.horizontal_max_tilt_deg, m.vertical_min_tilt_deg
@@ -471,29 +513,35 @@ impl Config {
             ("sources.d435i.key_prefix", &self.sources.d435i.key_prefix),
         ] {
             if v.is_empty() || v.contains(['*', '$', '?', '#']) || v.starts_with('/') || v.ends_with('/') {
-                return Err((key, format!("{v:?} must be a non-empty key without wildcards or leading/trailing '/'")));
+                return Err((
+                    key.into(),
+                    format!("{v:?} must be a non-empty key without wildcards or leading/trailing '/'"),
+                ));
             }
         }
         // The pose key is a key expression: rmw_zenoh's `0/vins_estimator/odometry/**` needs its wildcard.
         if let Err(e) = zenoh::key_expr::KeyExpr::try_from(z.pose_key.as_str()) {
-            return Err(("zenoh.pose_key", format!("{:?} is not a Zenoh key expression: {e}", z.pose_key)));
+            return Err(("zenoh.pose_key".into(), format!("{:?} is not a Zenoh key expression: {e}", z.pose_key)));
         }
         Ok(())
     }
 }
 
+/// A config value that cannot be used: its dotted key and why.
+pub type Invalid = (String, String);
+
 fn one_line(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
-fn check_positive(key: &'static str, v: f64) -> Result<(), (&'static str, String)> {
-    if v.is_finite() && v > 0.0 { Ok(()) } else { Err((key, format!("{v} must be a finite number above 0"))) }
+fn check_positive(key: &str, v: f64) -> Result<(), Invalid> {
+    if v.is_finite() && v > 0.0 { Ok(()) } else { Err((key.into(), format!("{v} must be a finite number above 0"))) }
 }
 
-fn check_range(key: &'static str, v: f64, lo: f64, hi: f64) -> Result<(), (&'static str, String)> {
+fn check_range(key: &str, v: f64, lo: f64, hi: f64) -> Result<(), Invalid> {
     if v.is_finite() && (lo..=hi).contains(&v) {
         Ok(())
     } else {
-        Err((key, format!("{v} must be within [{lo}, {hi}]")))
+        Err((key.into(), format!("{v} must be within [{lo}, {hi}]")))
     }
 }

@@ -571,7 +571,7 @@ async fn stream_d435i(
     }
     let session = session.clone();
     Ok(Some(tokio::spawn(async move {
-        if let Err(e) = crate::bus::publish_d435i(&session, &cfg.key_prefix, rx).await {
+        if let Err(e) = crate::bus::publish_d435i(&session, &cfg, rx).await {
             tracing::warn!("D435i publishing stopped: {e}");
         }
     })))

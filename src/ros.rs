@@ -180,19 +180,19 @@ pub fn ir_camera_info(stamp_ns: StampNs, index: u8, intr: &crate::types::Intrins
     }
 }
 
-/// One united IMU sample; no orientation (covariance[0] = -1, the ROS convention).
-pub fn imu(sample: &crate::camera::ImuSample) -> Imu {
+/// One united IMU sample as realsense-ros publishes it: no orientation (covariance[0] = -1,
+/// the ROS convention), and the configured variances on the rates' diagonals.
+pub fn imu(sample: &crate::camera::ImuSample, angular_velocity_cov: f64, linear_accel_cov: f64) -> Imu {
     let v = |a: [f64; 3]| Point { x: a[0], y: a[1], z: a[2] };
-    let mut no_orientation = [0.0; 9];
-    no_orientation[0] = -1.0;
+    let diagonal = |c: f64| [c, 0.0, 0.0, 0.0, c, 0.0, 0.0, 0.0, c];
     Imu {
         header: Header { stamp: Time::from_ns(sample.stamp_ns), frame_id: "camera_imu_optical_frame".into() },
         orientation: Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 },
-        orientation_covariance: no_orientation,
+        orientation_covariance: [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
         angular_velocity: v(sample.gyro),
-        angular_velocity_covariance: [0.0; 9],
+        angular_velocity_covariance: diagonal(angular_velocity_cov),
         linear_acceleration: v(sample.accel),
-        linear_acceleration_covariance: [0.0; 9],
+        linear_acceleration_covariance: diagonal(linear_accel_cov),
     }
 }
 

@@ -73,6 +73,73 @@ fn l515_options_from_the_config_reach_the_sensor() {
 }
 
 #[test]
+fn an_option_named_as_librealsense_or_as_realsense_ros_sets_the_same_option() {
+    let parse = |toml: &str| polymap::config::Config::parse(toml, "t.toml".as_ref()).map(|c| c.sources.depth.options);
+    let plain = parse("[sources.depth.options]\nlaser_power = 80\ndigital_gain = 2\nreceiver_gain = 18\n").unwrap();
+    // `depth_module.laser_power` as pasted from a realsense-ros launch file (a TOML dotted
+    // key), or quoted whole.
+    let ros = parse("[sources.depth.options]\ndepth_module.laser_power = 80\n\"depth_module.digital_gain\" = 2\ndepth_module.receiver_gain = 18\n").unwrap();
+    assert_eq!(plain, ros);
+    assert_eq!(
+        plain.as_list(),
+        vec![(CamOption::LaserPower, 80.0), (CamOption::DigitalGain, 2.0), (CamOption::ReceiverGain, 18.0)]
+    );
+    // The two spellings of one option at once is a mistake, not a choice.
+    let twice =
+        parse("[sources.depth.options]\nlaser_power = 80\ndepth_module.laser_power = 90\n").unwrap_err().to_string();
+    assert!(twice.contains("laser_power is set twice"), "{twice}");
+    // What the camera gets: digital_gain is librealsense's Digital Gain, receiver_gain its
+    // APD "Receiver Gain".
+    let mut sensor = FakeSensor::with(&[
+        (CamOption::GlobalTimeEnabled, 0.0),
+        (CamOption::LaserPower, 100.0),
+        (CamOption::DigitalGain, 1.0),
+        (CamOption::ReceiverGain, 9.0),
+    ]);
+    polymap::camera::apply_l515_options(&mut sensor, &ros).unwrap();
+    assert_eq!(sensor.get(CamOption::DigitalGain), Some(2.0));
+    assert_eq!(sensor.get(CamOption::ReceiverGain), Some(18.0));
+    assert_eq!(sensor.get(CamOption::LaserPower), Some(80.0));
+}
+
+#[test]
+fn receiver_gain_as_the_digital_gain_is_refused_saying_what_to_use() {
+    // polymap once set librealsense's Digital Gain under the name receiver_gain (0 auto,
+    // 1 high, 2 low); librealsense's "Receiver Gain" is the APD gain. Such a config stops.
+    for text in ["receiver_gain = 2", "depth_module.receiver_gain = 1", "receiver_gain = 0"] {
+        let e = polymap::config::Config::parse(&format!("[sources.depth.options]\n{text}\n"), "t.toml".as_ref())
+            .unwrap_err();
+        assert_eq!(e.key, "sources.depth.options.receiver_gain", "{e}");
+        assert!(e.reason.contains("APD") && e.reason.contains("set digital_gain ="), "{e}");
+    }
+}
+
+#[test]
+fn the_library_check_refuses_an_l515_on_2_55_or_later_and_accepts_2_54() {
+    use polymap::camera::{LibraryVersion, check_library};
+    let v = |major, minor, patch| LibraryVersion { major, minor, patch };
+    assert_eq!(LibraryVersion::from_api(25402), v(2, 54, 2));
+    assert_eq!(LibraryVersion::from_api(25605).to_string(), "2.56.5");
+    let headers = v(2, 54, 2);
+    // The pinned release, and any 2.54 patch, open the L515.
+    check_library(v(2, 54, 2), headers, true).unwrap();
+    check_library(v(2, 54, 1), headers, true).unwrap();
+    for newer in [v(2, 55, 1), v(2, 56, 5), v(2, 57, 0)] {
+        let e = check_library(newer, headers, true).unwrap_err().to_string();
+        assert!(!e.contains('\n'), "one line: {e}");
+        assert!(e.contains(&newer.to_string()) && e.contains("2.54.2") && e.contains("L515"), "{e}");
+        // A newer minor is compatible for everything but the L515 (the D435i, a recording).
+        check_library(newer, headers, false).unwrap();
+    }
+    // What librealsense itself refuses, said plainly: an older minor than the headers', or
+    // another major.
+    for refused in [v(2, 53, 1), v(3, 0, 0)] {
+        let e = check_library(refused, headers, false).unwrap_err().to_string();
+        assert!(!e.contains('\n') && e.contains(&refused.to_string()) && e.contains("built against 2.54.2"), "{e}");
+    }
+}
+
+#[test]
 fn a_camera_is_picked_by_serial_or_as_the_only_one_of_its_kind() {
     let found = vec![
         DeviceEntry { name: "Intel RealSense D435I".into(), serial: "843112071234".into() },

@@ -113,6 +113,12 @@ fn python_clients_decode_the_map_markers_ir_and_imu() {
         assert_eq!(imu["accel"][i].as_f64(), Some(want.accel[i]), "{stdout}");
         assert_eq!(imu["gyro"][i].as_f64(), Some(want.gyro[i]), "{stdout}");
     }
+    // Covariances as realsense-ros publishes them: no orientation, 0.01 on the diagonals.
+    let cov = |name: &str| -> Vec<f64> { imu[name].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect() };
+    assert_eq!(cov("orientation_covariance")[0], -1.0, "{stdout}");
+    for name in ["angular_velocity_covariance", "linear_acceleration_covariance"] {
+        assert_eq!(cov(name), vec![0.01, 0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.0, 0.01], "{name}: {stdout}");
+    }
     // The IMU streams at about gyro_hz (200).
     let rate = v["imu_rate_hz"].as_f64().unwrap();
     assert!((120.0..260.0).contains(&rate), "IMU rate {rate} Hz");

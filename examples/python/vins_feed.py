@@ -31,7 +31,10 @@ def summary(topic, m):
     if topic == "imu":
         a, w = m.linear_acceleration, m.angular_velocity
         stamp_ns = int(m.header.stamp.sec) * 1_000_000_000 + int(m.header.stamp.nanosec)
-        return {"stamp": stamp, "stamp_ns": stamp_ns, "frame_id": m.header.frame_id, "accel": [a.x, a.y, a.z], "gyro": [w.x, w.y, w.z]}
+        return {"stamp": stamp, "stamp_ns": stamp_ns, "frame_id": m.header.frame_id, "accel": [a.x, a.y, a.z], "gyro": [w.x, w.y, w.z],
+                "orientation_covariance": [float(v) for v in m.orientation_covariance],
+                "angular_velocity_covariance": [float(v) for v in m.angular_velocity_covariance],
+                "linear_acceleration_covariance": [float(v) for v in m.linear_acceleration_covariance]}
     if topic.endswith("image_rect_raw"):
         data = bytes(m.data)
         return {"stamp": stamp, "frame_id": m.header.frame_id, "width": int(m.width), "height": int(m.height),

@@ -36,33 +36,129 @@ pub enum CameraError {
     Timeout(Duration),
     #[error("the recording ended")]
     Ended,
+    /// The librealsense loaded at run time cannot serve: one line saying what to install.
+    #[error("{0}")]
+    Library(String),
 }
 
-/// The options polymap sets, named as realsense-ros names its parameters.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// A librealsense release, as `rs2_get_api_version` reports it (major * 10000 + minor * 100
+/// + patch).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct LibraryVersion {
+    pub major: u32,
+    pub minor: u32,
+    pub patch: u32,
+}
+
+impl LibraryVersion {
+    /// The release polymap pins: the newest that drives both cameras (2.55.1 dropped the
+    /// L500 series, the L515 among it).
+    pub const PINNED: LibraryVersion = LibraryVersion { major: 2, minor: 54, patch: 2 };
+
+    pub fn from_api(v: i32) -> LibraryVersion {
+        let v = v.max(0) as u32;
+        LibraryVersion { major: v / 10000, minor: v / 100 % 100, patch: v % 100 }
+    }
+
+    /// Whether this release still has the L500 series' code.
+    pub fn drives_l515(self) -> bool {
+        (self.major, self.minor) <= (2, 54)
+    }
+}
+
+impl std::fmt::Display for LibraryVersion {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}.{}.{}", self.major, self.minor, self.patch)
+    }
+}
+
+/// Whether polymap can work with the librealsense loaded at run time (`runtime`), having been
+/// built against the headers of `headers`; `opens_l515` when the depth camera to open is an
+/// L515. Refuses, in one line naming both versions and what to install, what librealsense
+/// itself would refuse (another major version, or an older minor than the headers': its
+/// `verify_version_compatibility`) and a library without L500 support for an L515.
+pub fn check_library(runtime: LibraryVersion, headers: LibraryVersion, opens_l515: bool) -> Result<(), CameraError> {
+    let pinned = LibraryVersion::PINNED;
+    if runtime.major != headers.major || runtime.minor < headers.minor {
+        return Err(CameraError::Library(format!(
+            "librealsense {runtime} is installed but polymap was built against {headers}, which librealsense \
+             refuses to pair: install librealsense {pinned} (README \"On the robot\") and rebuild polymap"
+        )));
+    }
+    if opens_l515 && !runtime.drives_l515() {
+        return Err(CameraError::Library(format!(
+            "librealsense {runtime} is installed, but it cannot open the L515 (2.55 and later dropped the L500 \
+             series): install librealsense {pinned} (README \"On the robot\")"
+        )));
+    }
+    Ok(())
+}
+
+/// The options polymap sets, each named as librealsense names it (`rs2_option_to_string`,
+/// lower case with underscores), which is also realsense-ros's parameter name
+/// (`depth_module.<name>`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum CamOption {
-    EmitterEnabled,
+    /// The L515's visual preset. First in this order: setting a preset resets the others.
     VisualPreset,
     LaserPower,
     ConfidenceThreshold,
     PreProcessingSharpening,
-    /// The L515's receiver gain (librealsense's RS2_OPTION_DIGITAL_GAIN).
+    /// The L515's "Digital Gain" (RS2_OPTION_DIGITAL_GAIN): 0 auto, 1 high, 2 low.
+    DigitalGain,
+    /// The L515's "Receiver Gain": librealsense's name for the avalanche photodiode's gain
+    /// (RS2_OPTION_AVALANCHE_PHOTO_DIODE), not the digital gain.
     ReceiverGain,
     MinDistance,
+    EmitterEnabled,
     GlobalTimeEnabled,
 }
 
 impl CamOption {
     pub fn name(self) -> &'static str {
         match self {
-            CamOption::EmitterEnabled => "emitter_enabled",
             CamOption::VisualPreset => "visual_preset",
             CamOption::LaserPower => "laser_power",
             CamOption::ConfidenceThreshold => "confidence_threshold",
             CamOption::PreProcessingSharpening => "pre_processing_sharpening",
+            CamOption::DigitalGain => "digital_gain",
             CamOption::ReceiverGain => "receiver_gain",
             CamOption::MinDistance => "min_distance",
+            CamOption::EmitterEnabled => "emitter_enabled",
             CamOption::GlobalTimeEnabled => "global_time_enabled",
+        }
+    }
+
+    /// The L515 options a user may set in `[sources.depth.options]`, in the order they are applied.
+    pub const L515: [CamOption; 7] = [
+        CamOption::VisualPreset,
+        CamOption::LaserPower,
+        CamOption::ConfidenceThreshold,
+        CamOption::PreProcessingSharpening,
+        CamOption::DigitalGain,
+        CamOption::ReceiverGain,
+        CamOption::MinDistance,
+    ];
+
+    /// An L515 option by its librealsense / realsense-ros name.
+    pub fn l515_by_name(name: &str) -> Option<CamOption> {
+        CamOption::L515.into_iter().find(|o| o.name() == name)
+    }
+
+    /// The values an L515 accepts (librealsense 2.54's L500 options; the camera reports its
+    /// own range too, and refuses what is outside it), and what they mean.
+    pub fn l515_range(self) -> (f32, f32, &'static str) {
+        match self {
+            CamOption::VisualPreset => {
+                (0.0, 5.0, "0 custom, 1 default, 2 no ambient light, 3 low ambient light, 4 max range, 5 short range")
+            }
+            CamOption::LaserPower => (0.0, 100.0, "%"),
+            CamOption::ConfidenceThreshold => (0.0, 3.0, ""),
+            CamOption::PreProcessingSharpening => (0.0, 5.0, ""),
+            CamOption::DigitalGain => (0.0, 2.0, "0 auto, 1 high, 2 low"),
+            CamOption::ReceiverGain => (9.0, 18.0, "the APD gain"),
+            CamOption::MinDistance => (0.0, 2000.0, "mm"),
+            CamOption::EmitterEnabled | CamOption::GlobalTimeEnabled => (0.0, 1.0, "0 off, 1 on"),
         }
     }
 }
@@ -84,6 +180,16 @@ pub fn set_option(sensor: &mut impl DeviceOptions, option: CamOption, value: f32
         return Err(err("is not supported by this sensor".into()));
     }
     sensor.set(option, value).map_err(|e| err(format!("could not be set to {value}: {e}")))
+}
+
+/// Sets the L515 options given in the config; the others keep the camera's values.
+pub fn apply_l515_options(sensor: &mut impl DeviceOptions, o: &crate::config::L515Options) -> Result<(), CameraError> {
+    // Stamps in the host-aligned global time domain, so they line up with VINS's poses.
+    set_option(sensor, CamOption::GlobalTimeEnabled, 1.0)?;
+    for (option, value) in o.as_list() {
+        set_option(sensor, option, value)?;
+    }
+    Ok(())
 }
 
 /// Switches the IR projector off and reads it back: its dot pattern breaks VINS's

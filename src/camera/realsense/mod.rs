@@ -1,6 +1,13 @@
-//! The L515 and D435i through librealsense (realsense-rust), and `.bag` playback through
-//! the same code. Each camera lives on the thread that reads it; frames leave as polymap's
-//! plain types.
+//! The L515 and D435i through librealsense 2.54 (realsense-rust), and `.bag` recordings of
+//! either played through the same code. Each camera lives on the thread that reads it;
+//! frames leave as polymap's plain types.
+//!
+//! - [`sys`]: what realsense-rust does not wrap: the library's version (the start-up check)
+//!   and playing a recording with real time off from its first frame.
+//! - [`bag`]: writing recordings with librealsense's own recorder.
+
+pub mod bag;
+mod sys;
 
 use std::collections::HashSet;
 use std::ffi::CStr;
@@ -10,13 +17,17 @@ use std::time::Duration;
 use realsense_rust::config::Config as RsConfig;
 use realsense_rust::context::Context;
 use realsense_rust::device::Device;
-use realsense_rust::frame::{AccelFrame, DepthFrame as RsDepthFrame, FrameEx, GyroFrame, InfraredFrame};
+use realsense_rust::frame::{
+    AccelFrame, CompositeFrame, DepthFrame as RsDepthFrame, FrameEx, GyroFrame, InfraredFrame,
+};
 use realsense_rust::kind::{Rs2CameraInfo, Rs2Format, Rs2Option, Rs2StreamKind};
-use realsense_rust::pipeline::{ActivePipeline, InactivePipeline};
+use realsense_rust::pipeline::{ActivePipeline, InactivePipeline, PipelineProfile};
 use realsense_rust::sensor::Sensor;
+use sys::{Playback, StreamRequest};
+pub use sys::{check_loaded_library, header_version, library_version};
 
 use super::{CamOption, CameraError, D435iSample, DeviceEntry, DeviceOptions, ImuUniter};
-use crate::config::{D435iConfig, DepthSourceConfig, L515Options};
+use crate::config::{D435iConfig, DepthSourceConfig};
 use crate::types::{DepthFrame, Intrinsics, StampNs};
 
 /// How long a frame may take before the stream counts as stopped (the L515 sends 30 Hz).
@@ -29,7 +40,8 @@ fn rs_option(o: CamOption) -> Rs2Option {
         CamOption::LaserPower => Rs2Option::LaserPower,
         CamOption::ConfidenceThreshold => Rs2Option::ConfidenceThreshold,
         CamOption::PreProcessingSharpening => Rs2Option::PreProcessingSharpening,
-        CamOption::ReceiverGain => Rs2Option::DigitalGain,
+        CamOption::DigitalGain => Rs2Option::DigitalGain,
+        CamOption::ReceiverGain => Rs2Option::AvalanchePhotoDiode,
         CamOption::MinDistance => Rs2Option::MinDistance,
         CamOption::GlobalTimeEnabled => Rs2Option::GlobalTimeEnabled,
     }
@@ -54,7 +66,8 @@ fn cstr(s: &CStr) -> String {
     s.to_string_lossy().into_owned()
 }
 
-fn driver(what: &str) -> impl Fn(anyhow::Error) -> CameraError + '_ {
+/// A driver error naming what was being done.
+fn driver<E: std::fmt::Display>(what: &str) -> impl Fn(E) -> CameraError + '_ {
     move |e| CameraError::Driver(format!("{what}: {e}"))
 }
 
@@ -66,9 +79,6 @@ fn entry(d: &Device) -> DeviceEntry {
     }
 }
 
-/// Picks the streams of one pipeline.
-type StreamChoice<'a> = &'a dyn Fn(&mut RsConfig) -> anyhow::Result<()>;
-
 /// Starts one pipeline per entry of `streams` on the camera `what` with `serial` ("" = the
 /// only one), after `prepare` has set its sensors' options. Separate pipelines on one
 /// device: librealsense's pipeline keeps only the newest motion frame of each frameset, so
@@ -77,8 +87,9 @@ fn start_device<const N: usize>(
     what: &'static str,
     serial: &str,
     prepare: impl FnOnce(&mut [Sensor]) -> Result<(), CameraError>,
-    streams: [StreamChoice; N],
-) -> Result<[ActivePipeline; N], CameraError> {
+    streams: [&[StreamRequest]; N],
+) -> Result<[Frames; N], CameraError> {
+    sys::check_loaded_library(what == L515)?;
     let context = Context::new().map_err(|e| CameraError::Driver(format!("librealsense context: {e}")))?;
     let devices = context.query_devices(HashSet::new());
     let found: Vec<DeviceEntry> = devices.iter().map(entry).collect();
@@ -86,14 +97,17 @@ fn start_device<const N: usize>(
     let mut sensors = devices[index].sensors();
     prepare(&mut sensors)?;
     let serial = std::ffi::CString::new(found[index].serial.clone()).unwrap_or_default();
-    let start = |streams: StreamChoice| {
+    let start = |streams: &[StreamRequest]| {
         let mut config = RsConfig::new();
         config
             .enable_device_from_serial(&serial)
             .map_err(|e| CameraError::Driver(format!("{what} {serial:?}: {e}")))?;
-        streams(&mut config).map_err(driver(what))?;
+        config.disable_all_streams().map_err(driver(what))?;
+        for s in streams {
+            config.enable_stream(s.kind, s.index, s.width, s.height, s.format, s.fps).map_err(driver(what))?;
+        }
         let pipeline = InactivePipeline::try_from(&context).map_err(|e| CameraError::Driver(format!("{what}: {e}")))?;
-        pipeline.start(Some(config)).map_err(driver(what))
+        pipeline.start(Some(config)).map(Frames::Camera).map_err(driver(what))
     };
     let mut started = Vec::with_capacity(N);
     for s in streams {
@@ -102,17 +116,58 @@ fn start_device<const N: usize>(
     Ok(started.try_into().unwrap_or_else(|_| unreachable!("one pipeline per entry")))
 }
 
-/// Starts a pipeline playing all of `path`'s streams once.
-fn start_bag(path: &Path) -> Result<ActivePipeline, CameraError> {
-    if !path.is_file() {
-        return Err(CameraError::Driver(format!("bag {}: no such file", path.display())));
+/// The depth camera's name as librealsense lists it.
+const L515: &str = "L515";
+
+/// Where a camera's frame sets come from.
+enum Frames {
+    /// A camera, through realsense-rust's pipeline.
+    Camera(ActivePipeline),
+    /// A recording, through the C API ([`Playback`]).
+    Recording(Playback),
+}
+
+impl Frames {
+    fn recording(path: &Path, streams: &[StreamRequest]) -> Result<Frames, CameraError> {
+        sys::check_loaded_library(false)?;
+        Playback::start(path, streams).map(Frames::Recording)
     }
-    let fail = |e: &dyn std::fmt::Display| CameraError::Driver(format!("bag {}: {e}", path.display()));
-    let context = Context::new().map_err(|e| fail(&e))?;
-    let mut config = RsConfig::new();
-    config.enable_device_from_file(path, false).map_err(|e| fail(&e))?;
-    let pipeline = InactivePipeline::try_from(&context).map_err(|e| fail(&e))?;
-    pipeline.start(Some(config)).map_err(|e| fail(&e))
+
+    fn profile(&self) -> &PipelineProfile {
+        match self {
+            Frames::Camera(p) => p.profile(),
+            Frames::Recording(p) => p.profile(),
+        }
+    }
+
+    /// The next frame set: `Timeout` when a camera sends nothing for `timeout`, `Ended` when a
+    /// recording has nothing more.
+    fn wait(&mut self, timeout: Duration) -> Result<CompositeFrame, CameraError> {
+        match self {
+            Frames::Camera(p) => p.wait(Some(timeout)).map_err(|_| CameraError::Timeout(timeout)),
+            Frames::Recording(p) => p.wait(timeout)?.ok_or(CameraError::Ended),
+        }
+    }
+
+    /// A frame set if one is waiting.
+    fn poll(&mut self) -> Result<Option<CompositeFrame>, CameraError> {
+        match self {
+            Frames::Camera(p) => match p.poll() {
+                Ok(std::task::Poll::Ready(f)) => Ok(Some(f)),
+                Ok(std::task::Poll::Pending) => Ok(None),
+                Err(e) => Err(CameraError::Driver(e.to_string())),
+            },
+            Frames::Recording(p) => p.poll(),
+        }
+    }
+
+    /// What nothing arriving for a while means: a stopped camera, or a recording's end.
+    fn silence(&self) -> CameraError {
+        match self {
+            Frames::Camera(_) => CameraError::Timeout(FRAME_TIMEOUT),
+            Frames::Recording(_) => CameraError::Ended,
+        }
+    }
 }
 
 /// A stream's pinhole intrinsics as polymap's plain type (rectified streams: no distortion).
@@ -148,63 +203,45 @@ fn stamp_ns(frame: &impl FrameEx) -> StampNs {
 /// The L515's depth (or a recording of it), as `DepthFrame`s with the device's own
 /// intrinsics and depth scale.
 pub struct RealsenseDepth {
-    pipeline: ActivePipeline,
+    frames: Frames,
     intrinsics: Intrinsics,
-    feed: Feed,
-}
-
-/// Where the frames come from; for a recording, how far its switch to every frame got.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Feed {
-    /// A camera only stops; it never ends.
-    Camera,
-    /// A recording as librealsense starts it: in real time, dropping what a busy reader misses.
-    RealTimePlayback,
-    /// Switched to every frame and rewound: frames left over from before the rewind are
-    /// skipped until one stamped at or before `from` (the recording's start) arrives.
-    Rewound { from: StampNs },
-    /// Every frame, in order, until the recording ends.
-    EveryFrame,
 }
 
 impl RealsenseDepth {
     /// The L515 named by `cfg.serial` (or the only one), with the configured profile and options.
     pub fn open(cfg: &DepthSourceConfig) -> Result<RealsenseDepth, CameraError> {
-        let [pipeline] = start_device(
-            "L515",
+        let (w, h, fps) = (cfg.width as usize, cfg.height as usize, cfg.fps as usize);
+        let depth =
+            StreamRequest { kind: Rs2StreamKind::Depth, index: None, width: w, height: h, format: Rs2Format::Z16, fps };
+        let [frames] = start_device(
+            L515,
             &cfg.serial,
             |sensors| {
                 for s in sensors.iter_mut().filter(|s| s.supports_option(Rs2Option::DepthUnits)) {
-                    apply_l515_options(s, &cfg.options)?;
+                    super::apply_l515_options(s, &cfg.options)?;
                 }
                 Ok(())
             },
-            [&|c: &mut RsConfig| {
-                c.disable_all_streams()?;
-                let (w, h, fps) = (cfg.width as usize, cfg.height as usize, cfg.fps as usize);
-                c.enable_stream(Rs2StreamKind::Depth, None, w, h, Rs2Format::Z16, fps)?;
-                Ok(())
-            }],
+            [&[depth]],
         )?;
-        Self::from_pipeline(pipeline, Feed::Camera)
+        Self::from_frames(frames)
     }
 
-    /// Plays a `.bag` recording (realsense-viewer's, or one made by scripts/make_bag.py)
-    /// through librealsense, once.
+    /// Plays the depth stream of a `.bag` recording (realsense-viewer's, or one written by
+    /// [`bag::write_l515_bag`]) once, every frame.
     pub fn open_bag(path: &Path) -> Result<RealsenseDepth, CameraError> {
-        Self::from_pipeline(start_bag(path)?, Feed::RealTimePlayback)
+        Self::from_frames(Frames::recording(path, &[StreamRequest::any(Rs2StreamKind::Depth, None)])?)
     }
 
-    fn from_pipeline(pipeline: ActivePipeline, feed: Feed) -> Result<RealsenseDepth, CameraError> {
-        let stream = pipeline
-            .profile()
+    fn from_frames(frames: Frames) -> Result<RealsenseDepth, CameraError> {
+        let profile = frames.profile();
+        let stream = profile
             .streams()
             .iter()
             .find(|s| s.kind() == Rs2StreamKind::Depth)
             .ok_or_else(|| CameraError::Driver("no depth stream".into()))?;
         let i = stream.intrinsics().map_err(|e| CameraError::Driver(format!("depth intrinsics: {e}")))?;
-        let depth_scale = pipeline
-            .profile()
+        let depth_scale = profile
             .device()
             .sensors()
             .iter()
@@ -214,7 +251,7 @@ impl RealsenseDepth {
         if let Some(p) = intrinsics.problem() {
             return Err(CameraError::Driver(format!("the camera's intrinsics are unusable: {p}")));
         }
-        Ok(RealsenseDepth { pipeline, intrinsics, feed })
+        Ok(RealsenseDepth { frames, intrinsics })
     }
 
     /// Read from the device (or the recording), never from the config.
@@ -226,24 +263,8 @@ impl RealsenseDepth {
     /// of a recording.
     pub fn next_frame(&mut self) -> Result<DepthFrame, CameraError> {
         loop {
-            let frames = match self.pipeline.wait(Some(FRAME_TIMEOUT)) {
-                Ok(f) => f,
-                Err(_) if self.feed == Feed::Camera => return Err(CameraError::Timeout(FRAME_TIMEOUT)),
-                Err(_) => return Err(CameraError::Ended),
-            };
+            let frames = self.frames.wait(FRAME_TIMEOUT)?;
             let Some(depth) = frames.frames_of_type::<RsDepthFrame>().pop() else { continue };
-            let stamp_ns = stamp_ns(&depth);
-            match self.feed {
-                Feed::RealTimePlayback => {
-                    // The first frame came in real time; frames before it may be lost already.
-                    play_every_frame_from_start(depth)?;
-                    self.feed = Feed::Rewound { from: stamp_ns };
-                    continue;
-                }
-                Feed::Rewound { from } if stamp_ns > from => continue,
-                Feed::Rewound { .. } => self.feed = Feed::EveryFrame,
-                Feed::Camera | Feed::EveryFrame => {}
-            }
             let (w, h) = (depth.width(), depth.height());
             if w != self.intrinsics.width as usize || h != self.intrinsics.height as usize || depth.stride() < 2 * w {
                 return Err(CameraError::Driver(format!(
@@ -254,7 +275,7 @@ impl RealsenseDepth {
             // SAFETY: a Z16 frame holds `height` rows of `stride` bytes, 2-byte aligned.
             let pixels = unsafe { unstride::<u16>(depth.get_data(), depth.stride(), w, h) };
             return Ok(DepthFrame {
-                stamp_ns,
+                stamp_ns: stamp_ns(&depth),
                 width: w as u32,
                 height: h as u32,
                 depth_scale: self.intrinsics.depth_scale,
@@ -264,72 +285,34 @@ impl RealsenseDepth {
     }
 }
 
-/// librealsense plays a recording in real time, dropping the frames a busy reader misses;
-/// a recording should give every frame, the same on any machine. So on the first frame,
-/// playback is switched to wait for its reader and rewound to the start (the depth stream
-/// then skips what came before the rewind by its stamps). realsense-rust has no playback
-/// API: this goes to the C API, through the playback device behind the frame's sensor.
-fn play_every_frame_from_start(frame: RsDepthFrame) -> Result<(), CameraError> {
-    use realsense_sys as sys;
-    fn check(err: *mut sys::rs2_error, what: &str) -> Result<(), CameraError> {
-        if err.is_null() {
-            return Ok(());
-        }
-        // SAFETY: a non-null rs2_error from the call just made, freed once here.
-        let message = unsafe {
-            let m = CStr::from_ptr(sys::rs2_get_error_message(err)).to_string_lossy().into_owned();
-            sys::rs2_free_error(err);
-            m
-        };
-        Err(CameraError::Driver(format!("{what}: {message}")))
-    }
-    // SAFETY: we own the frame from get_owned_raw and release it; the sensor and device
-    // handles made from it are deleted after use, as the C API documents.
-    unsafe {
-        let raw = frame.get_owned_raw();
-        let mut err = std::ptr::null_mut();
-        let sensor = sys::rs2_get_frame_sensor(raw.as_ptr(), &mut err);
-        let mut result = check(err, "the recording's sensor");
-        if result.is_ok() {
-            let device = sys::rs2_create_device_from_sensor(sensor, &mut err);
-            result = check(err, "the recording's device");
-            if result.is_ok() {
-                sys::rs2_playback_device_set_real_time(device, 0, &mut err);
-                result = check(err, "switching playback off real time");
-                if result.is_ok() {
-                    sys::rs2_playback_seek(device, 0, &mut err);
-                    result = check(err, "rewinding the recording");
-                }
-                sys::rs2_delete_device(device);
-            }
-            sys::rs2_delete_sensor(sensor);
-        }
-        sys::rs2_release_frame(raw.as_ptr());
-        result
-    }
-}
-
-/// Sets the L515 options given in the config; the others keep the camera's values.
-pub fn apply_l515_options(sensor: &mut impl DeviceOptions, o: &L515Options) -> Result<(), CameraError> {
-    // Stamps in the host-aligned global time domain, so they line up with VINS's poses.
-    super::set_option(sensor, CamOption::GlobalTimeEnabled, 1.0)?;
-    for (option, value) in o.as_list() {
-        super::set_option(sensor, option, value)?;
-    }
-    Ok(())
-}
-
 /// The D435i: infra1 + infra2 and the united IMU, its IR projector off. Two pipelines, IR
-/// and IMU (see [`start_device`]).
+/// and IMU (see [`start_device`]); a recording plays the same two ways.
 pub struct RealsenseD435i {
-    ir: ActivePipeline,
-    imu: ActivePipeline,
+    ir: Frames,
+    imu: Frames,
     uniter: ImuUniter,
     intrinsics: [Intrinsics; 2],
 }
 
 impl RealsenseD435i {
     pub fn open(cfg: &D435iConfig) -> Result<RealsenseD435i, CameraError> {
+        let (w, h, fps) = (cfg.ir_width as usize, cfg.ir_height as usize, cfg.ir_fps as usize);
+        let infra = |i| StreamRequest {
+            kind: Rs2StreamKind::Infrared,
+            index: Some(i),
+            width: w,
+            height: h,
+            format: Rs2Format::Y8,
+            fps,
+        };
+        let motion = |kind, fps: u32| StreamRequest {
+            kind,
+            index: None,
+            width: 0,
+            height: 0,
+            format: Rs2Format::MotionXyz32F,
+            fps: fps as usize,
+        };
         let [ir, imu] = start_device(
             "D435I",
             &cfg.serial,
@@ -345,21 +328,24 @@ impl RealsenseD435i {
                 Ok(())
             },
             [
-                &|c: &mut RsConfig| {
-                    c.disable_all_streams()?;
-                    let (w, h, fps) = (cfg.ir_width as usize, cfg.ir_height as usize, cfg.ir_fps as usize);
-                    c.enable_stream(Rs2StreamKind::Infrared, Some(1), w, h, Rs2Format::Y8, fps)?;
-                    c.enable_stream(Rs2StreamKind::Infrared, Some(2), w, h, Rs2Format::Y8, fps)?;
-                    Ok(())
-                },
-                &|c: &mut RsConfig| {
-                    c.disable_all_streams()?;
-                    c.enable_stream(Rs2StreamKind::Gyro, None, 0, 0, Rs2Format::MotionXyz32F, cfg.gyro_hz as usize)?;
-                    c.enable_stream(Rs2StreamKind::Accel, None, 0, 0, Rs2Format::MotionXyz32F, cfg.accel_hz as usize)?;
-                    Ok(())
-                },
+                &[infra(1), infra(2)],
+                &[motion(Rs2StreamKind::Gyro, cfg.gyro_hz), motion(Rs2StreamKind::Accel, cfg.accel_hz)],
             ],
         )?;
+        Self::from_frames(ir, imu)
+    }
+
+    /// Plays a D435i recording (infra1, infra2, gyro and accel) once, every frame, through
+    /// the same two pipelines as the camera.
+    pub fn open_bag(path: &Path) -> Result<RealsenseD435i, CameraError> {
+        let any = StreamRequest::any;
+        let ir =
+            Frames::recording(path, &[any(Rs2StreamKind::Infrared, Some(1)), any(Rs2StreamKind::Infrared, Some(2))])?;
+        let imu = Frames::recording(path, &[any(Rs2StreamKind::Gyro, None), any(Rs2StreamKind::Accel, None)])?;
+        Self::from_frames(ir, imu)
+    }
+
+    fn from_frames(ir: Frames, imu: Frames) -> Result<RealsenseD435i, CameraError> {
         let mut intrinsics = [Intrinsics::L515_320X240; 2];
         for s in ir.profile().streams().iter().filter(|s| s.kind() == Rs2StreamKind::Infrared) {
             let i = s.intrinsics().map_err(|e| CameraError::Driver(format!("IR intrinsics: {e}")))?;
@@ -369,15 +355,14 @@ impl RealsenseD435i {
         Ok(RealsenseD435i { ir, imu, uniter: ImuUniter::default(), intrinsics })
     }
 
-    /// The next samples: IR images and the IMU samples completed so far. `Timeout` when
-    /// nothing came for 2 s.
+    /// The next samples: IR images and the IMU samples completed so far. `Timeout` when a
+    /// camera sent nothing for 2 s, `Ended` when a recording has nothing more.
     pub fn next_samples(&mut self) -> Result<Vec<D435iSample>, CameraError> {
         let since = std::time::Instant::now();
         loop {
             let mut got = false;
             let mut out = Vec::new();
-            let poll_err = |e: realsense_rust::pipeline::FrameWaitError| CameraError::Driver(format!("D435i: {e}"));
-            if let std::task::Poll::Ready(frames) = self.ir.poll().map_err(poll_err)? {
+            if let Some(frames) = self.ir.poll()? {
                 got = true;
                 for f in frames.frames_of_type::<InfraredFrame>() {
                     let index = f.stream_profile().index() as u8;
@@ -387,7 +372,7 @@ impl RealsenseD435i {
                     out.push(D435iSample::Infrared { index, stamp_ns: stamp_ns(&f), intrinsics, pixels });
                 }
             }
-            if let std::task::Poll::Ready(frames) = self.imu.poll().map_err(poll_err)? {
+            if let Some(frames) = self.imu.poll()? {
                 got = true;
                 // A motion pipeline repeats its newest sample of each stream in every
                 // frameset; the uniter drops the repeats.
@@ -405,7 +390,7 @@ impl RealsenseD435i {
                 return Ok(out);
             }
             if since.elapsed() > FRAME_TIMEOUT {
-                return Err(CameraError::Timeout(FRAME_TIMEOUT));
+                return Err(self.ir.silence());
             }
             std::thread::sleep(Duration::from_millis(1));
         }
