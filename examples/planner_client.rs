@@ -1,29 +1,49 @@
 //! A planner-side client: follows the map's updates, asks for the whole map once, and asks
-//! for the foothold under a point, the way a footstep planner would every step.
+//! for the foothold under a point, the way a footstep planner would every step. It is a
+//! ROS 2 node on rmw_zenoh (polymap's own ROS 2 layer), so the same calls reach polymap
+//! beside any other ROS 2 node.
 //!
 //! With a mapper running (`polymap demo --duration 60` in another shell, or `polymap run`):
-//!   cargo run --example planner_client -- [ZENOH_JSON5] [PREFIX]
-//! ZENOH_JSON5 defaults to Zenoh's defaults (a peer that scouts for others);
-//! PREFIX defaults to polymap/leju.
+//!   cargo run --release --example planner_client -- [ENDPOINT] [NAMESPACE]
+//! ENDPOINT defaults to tcp/127.0.0.1:7447 (where `polymap demo` and rmw_zenohd listen);
+//! NAMESPACE to polymap's, /polymap/leju.
 
 use std::time::Duration;
 
-use polymap::ros::{self, FootholdMsg, MapMsg, MapUpdateMsg};
+use polymap::config::Config;
+use polymap::interface::{Interface, convert};
+use polymap::ros2::msg::{GetFootholdRequest, GetMapRequest, Point};
+use polymap::ros2::{Node, NodeOptions, RosName};
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
-    let config = match args.next() {
-        Some(path) => zenoh::Config::from_file(&path).map_err(|e| anyhow::anyhow!("{path}: {e}"))?,
-        None => zenoh::Config::default(),
-    };
-    let prefix = args.next().unwrap_or_else(|| "polymap/leju".into());
-    let session = zenoh::open(config).await.map_err(|e| anyhow::anyhow!("{e}"))?;
+    let endpoint = args.next().unwrap_or_else(|| "tcp/127.0.0.1:7447".into());
+    let mut config = Config::default();
+    if let Some(ns) = args.next() {
+        config.ros2.namespace = RosName::parse(&ns).map_err(|e| anyhow::anyhow!(e))?;
+    }
+    let zenoh = zenoh::Config::from_json5(
+        &serde_json::json!({
+            "mode": "peer",
+            "connect": { "endpoints": [endpoint] },
+            "listen": { "endpoints": ["tcp/127.0.0.1:0"] },
+            "scouting": { "multicast": { "enabled": false } },
+        })
+        .to_string(),
+    )
+    .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let session = polymap::ros2::session::open(zenoh).await?;
+    let node = Node::new(
+        &session,
+        NodeOptions { namespace: RosName::root(), name: "planner_client".into(), ..config.ros2.node_options() },
+    )
+    .await?;
+    let interface = Interface::new(&config);
 
     // Updates: whole polygons added or changed, ids removed.
-    let _updates = session
-        .declare_subscriber(format!("{prefix}/map/updates"))
-        .callback(|sample| match ros::decode::<MapUpdateMsg>(&sample.payload().to_bytes()) {
+    let _updates = node
+        .subscribe(&interface.map_updates, |u| match u {
             Ok(u) => println!(
                 "update: {} added, {} changed, {} removed; drift {:.1} mm",
                 u.added.len(),
@@ -33,40 +53,29 @@ async fn main() -> anyhow::Result<()> {
             ),
             Err(e) => eprintln!("undecodable update: {e}"),
         })
-        .await
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+        .await?;
     tokio::time::sleep(Duration::from_secs(2)).await;
 
     // The whole map at once, as a planner joining late gets it.
-    let replies = session.get(format!("{prefix}/map")).await.map_err(|e| anyhow::anyhow!("{e}"))?;
-    while let Ok(reply) = replies.recv_async().await {
-        let sample = reply.result().map_err(|e| anyhow::anyhow!("map query failed: {e:?}"))?;
-        let map: MapMsg = ros::decode(&sample.payload().to_bytes()).map_err(|e| anyhow::anyhow!(e))?;
-        println!("map: {} polygons", map.polygons.len());
-        for p in &map.polygons {
-            println!("  {:>4} {:<8} step {:>2}  area {:.3} m2  z {:.3} m", p.id, p.label, p.step, p.area, p.centroid.z);
-        }
+    let get_map = node.client(&interface.get_map).await?;
+    let map = get_map.call(&GetMapRequest::default(), Duration::from_secs(5)).await?.map;
+    println!("map: {} polygons in frame {:?}", map.polygons.len(), map.header.frame_id);
+    for p in &map.polygons {
+        let label = convert::label_of(p.label).map_or("?".into(), |l| format!("{l:?}").to_lowercase());
+        println!("  {:>4} {:<8} step {:>2}  area {:.3} m2  z {:.3} m", p.id, label, p.step, p.area, p.centroid.z);
     }
 
     // The foothold under a point on the second tread of the mock stairs.
-    let replies =
-        session.get(format!("{prefix}/foothold?x=0.42;y=0.0;z=0.30")).await.map_err(|e| anyhow::anyhow!("{e}"))?;
-    while let Ok(reply) = replies.recv_async().await {
-        match reply.result() {
-            Ok(sample) => {
-                let f: FootholdMsg = ros::decode(&sample.payload().to_bytes()).map_err(|e| anyhow::anyhow!(e))?;
-                println!(
-                    "foothold: found {} (contains {}), polygon {} ({}), piece of {} vertices, {:.3} m away",
-                    f.found,
-                    f.contains,
-                    f.polygon_id,
-                    f.label,
-                    f.piece.len(),
-                    f.distance
-                );
-            }
-            Err(e) => eprintln!("foothold query refused: {}", String::from_utf8_lossy(&e.payload().to_bytes())),
-        }
-    }
+    let get_foothold = node.client(&interface.get_foothold).await?;
+    let request = GetFootholdRequest { point: Point { x: 0.42, y: 0.0, z: 0.30 } };
+    let f = get_foothold.call(&request, Duration::from_secs(5)).await?.foothold;
+    println!(
+        "foothold: found {} (contains {}), polygon {}, piece of {} vertices, {:.3} m away",
+        f.found,
+        f.contains,
+        f.polygon_id,
+        f.piece.len(),
+        f.distance
+    );
     Ok(())
 }

@@ -6,7 +6,7 @@ use serde::Serialize;
 use crate::extract::StageTimes;
 
 /// Median and 99th percentile of one stage, ms.
-#[derive(Clone, Copy, Debug, Serialize)]
+#[derive(Clone, Copy, Debug, Default, Serialize)]
 pub struct Spread {
     pub median: f64,
     pub p99: f64,

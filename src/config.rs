@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::camera::CamOption;
+pub use crate::ros2::{Distro, Encoding, RosName};
 
 /// A configuration problem: which file, which key, why.
 #[derive(Debug, thiserror::Error)]
@@ -28,7 +29,9 @@ pub struct Config {
     pub sources: SourcesConfig,
     pub pipeline: PipelineConfig,
     pub map: MapConfig,
+    pub poses: PosesConfig,
     pub zenoh: ZenohConfig,
+    pub ros2: Ros2Config,
 }
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -192,9 +195,9 @@ pub struct D435iConfig {
     /// realsense-ros's `angular_velocity_cov` and `linear_accel_cov`, with its defaults.
     pub angular_velocity_cov: f64,
     pub linear_accel_cov: f64,
-    /// Zenoh keys of the IR images, camera infos and IMU: realsense-ros's topic names
-    /// (`/camera/camera/imu`) as zenoh-bridge-ros2dds maps them (`camera/camera/imu`).
-    pub key_prefix: String,
+    /// ROS 2 namespace of the IR images, camera infos and IMU, as realsense-ros names them
+    /// (`/camera/camera/infra1/image_rect_raw`, `/camera/camera/imu`).
+    pub namespace: RosName,
 }
 
 impl Default for D435iConfig {
@@ -209,7 +212,7 @@ impl Default for D435iConfig {
             accel_hz: 250,
             angular_velocity_cov: 0.01,
             linear_accel_cov: 0.01,
-            key_prefix: "camera/camera".into(),
+            namespace: RosName::parse("/camera/camera").expect("a valid name"),
         }
     }
 }
@@ -351,38 +354,101 @@ impl Default for MapConfig {
     }
 }
 
+/// How odometry poses are taken in.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct ZenohConfig {
-    /// Zenoh JSON5 configuration file; empty = a peer on loopback-only defaults.
-    pub config_file: PathBuf,
-    /// Keys are published under `<key_prefix>/<robot>/`.
-    pub key_prefix: String,
-    pub robot: String,
-    /// Key expression of the VINS odometry (nav_msgs/Odometry, ROS 2 CDR).
-    pub pose_key: String,
+pub struct PosesConfig {
     /// A frame between two poses further apart than this gets no pose and is skipped, s.
-    pub pose_max_gap_s: f64,
-    /// How polymap's own messages are encoded: ROS 2 CDR, or JSON for debugging.
+    pub max_gap_s: f64,
+}
+
+impl Default for PosesConfig {
+    fn default() -> Self {
+        PosesConfig { max_gap_s: 0.1 }
+    }
+}
+
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ZenohConfig {
+    /// Zenoh JSON5 configuration file; empty = `ZENOH_SESSION_CONFIG_URI` or `ZENOH_CONFIG`
+    /// when set, else rmw_zenoh's session defaults (a peer of the rmw_zenohd router on this
+    /// machine, loopback only, multicast off).
+    pub config_file: PathBuf,
+}
+
+/// Which ROS 2 conventions polymap's topics and services follow on Zenoh.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WireMode {
+    /// rmw_zenoh, ROS 2's Zenoh middleware.
+    RmwZenoh,
+    /// Beside a zenoh-bridge-ros2dds (ROS 2 nodes on DDS).
+    Bridge,
+}
+
+/// What VINS's odometry topic carries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OdometryType {
+    /// nav_msgs/Odometry, as VINS-Fusion publishes it.
+    Odometry,
+    /// geometry_msgs/PoseStamped.
+    PoseStamped,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Ros2Config {
+    pub mode: WireMode,
+    /// rmw_zenoh's key format: jazzy (type hashes; also Kilted and Rolling) or humble (none).
+    pub distro: Distro,
+    /// ROS_DOMAIN_ID.
+    pub domain_id: u32,
+    /// polymap's node and its topics live here: `<namespace>/map_updates`, ...
+    pub namespace: RosName,
+    /// The node's name.
+    pub node: String,
+    /// VINS's odometry topic.
+    pub odometry: RosName,
+    pub odometry_type: OdometryType,
+    /// How polymap's topics are encoded: ROS 2 CDR, or JSON for looking at them with plain
+    /// Zenoh tools.
     pub encoding: Encoding,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Encoding {
-    Cdr,
-    Json,
+impl Default for Ros2Config {
+    fn default() -> Self {
+        Ros2Config {
+            mode: WireMode::RmwZenoh,
+            distro: Distro::Jazzy,
+            domain_id: 0,
+            namespace: RosName::parse("/polymap/leju").expect("a valid name"),
+            node: "polymap".into(),
+            odometry: RosName::parse("/odometry").expect("a valid name"),
+            odometry_type: OdometryType::Odometry,
+            encoding: Encoding::Cdr,
+        }
+    }
 }
 
-impl Default for ZenohConfig {
-    fn default() -> Self {
-        ZenohConfig {
-            config_file: PathBuf::new(),
-            key_prefix: "polymap".into(),
-            robot: "leju".into(),
-            pose_key: "vins_estimator/odometry".into(),
-            pose_max_gap_s: 0.1,
-            encoding: Encoding::Cdr,
+impl Ros2Config {
+    /// The wire conventions this config asks for.
+    pub fn mode(&self) -> crate::ros2::Mode {
+        match self.mode {
+            WireMode::RmwZenoh => crate::ros2::Mode::RmwZenoh(self.distro),
+            WireMode::Bridge => crate::ros2::Mode::Bridge,
+        }
+    }
+
+    /// polymap's node.
+    pub fn node_options(&self) -> crate::ros2::NodeOptions {
+        crate::ros2::NodeOptions {
+            mode: self.mode(),
+            domain: self.domain_id,
+            namespace: self.namespace.clone(),
+            name: self.node.clone(),
+            encoding: self.encoding,
         }
     }
 }
@@ -505,23 +571,13 @@ impl Config {
             ));
         }
 
-        let z = &self.zenoh;
-        check_range("zenoh.pose_max_gap_s", z.pose_max_gap_s, 0.001, 10.0)?;
-        for (key, v) in [
-            ("zenoh.key_prefix", &z.key_prefix),
-            ("zenoh.robot", &z.robot),
-            ("sources.d435i.key_prefix", &self.sources.d435i.key_prefix),
-        ] {
-            if v.is_empty() || v.contains(['*', '$', '?', '#']) || v.starts_with('/') || v.ends_with('/') {
-                return Err((
-                    key.into(),
-                    format!("{v:?} must be a non-empty key without wildcards or leading/trailing '/'"),
-                ));
-            }
-        }
-        // The pose key is a key expression: rmw_zenoh's `0/vins_estimator/odometry/**` needs its wildcard.
-        if let Err(e) = zenoh::key_expr::KeyExpr::try_from(z.pose_key.as_str()) {
-            return Err(("zenoh.pose_key".into(), format!("{:?} is not a Zenoh key expression: {e}", z.pose_key)));
+        check_range("poses.max_gap_s", self.poses.max_gap_s, 0.001, 10.0)?;
+        let r = &self.ros2;
+        check_range("ros2.domain_id", r.domain_id as f64, 0.0, 232.0)?;
+        let node_name_ok = r.node.chars().next().is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+            && r.node.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+        if !node_name_ok {
+            return Err(("ros2.node".into(), format!("{:?} is not a ROS node name (letters, digits and '_')", r.node)));
         }
         Ok(())
     }

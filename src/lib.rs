@@ -6,17 +6,18 @@
 //! (metres, radians, nanosecond stamps, `T_a_b` maps frame b into frame a).
 
 pub mod bench;
-pub mod bus;
 pub mod camera;
+pub mod clock;
 pub mod config;
 pub mod eval;
 pub mod extract;
-pub mod live;
+pub mod interface;
 pub mod map;
-pub mod mock_vins;
+pub mod mock;
 pub mod pose;
 pub mod replay;
-pub mod ros;
+pub mod ros2;
+pub mod runtime;
 pub mod sequence;
 pub mod synth;
 pub mod types;

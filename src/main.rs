@@ -157,8 +157,8 @@ enum Command {
         #[arg(long, default_value_t = 100.0)]
         vins_rate: f64,
     },
-    /// Publish a sequence's poses as VINS would: nav_msgs/Odometry (ROS 2 CDR) over Zenoh
-    /// on the config's pose key, the sequence looped on the wall clock
+    /// Publish a sequence's poses as VINS-Fusion's ROS 2 port would: nav_msgs/Odometry on the
+    /// config's odometry topic, the sequence looped on the wall clock
     MockVins {
         seq: PathBuf,
         /// Poses per second
@@ -170,7 +170,7 @@ enum Command {
         /// Stop after this many seconds (default: run until interrupted)
         #[arg(long)]
         duration: Option<f64>,
-        /// Zenoh settings ([zenoh] config_file, pose_key) from this config file
+        /// Zenoh and ROS 2 settings ([zenoh], [ros2]) from this config file
         #[arg(long)]
         config: Option<PathBuf>,
     },
@@ -306,14 +306,14 @@ fn run(cli: Cli) -> Result<()> {
             let config = load_config(config, None)?;
             let duration = duration.map(seconds).transpose()?;
             let runtime = tokio::runtime::Runtime::new()?;
-            println!("{}", runtime.block_on(polymap::live::run(&config, duration))?);
+            println!("{}", runtime.block_on(polymap::runtime::run(&config, duration))?);
         }
         Command::Demo { duration, config, out, render, vins_rate } => {
             let mut config = load_config(config, None)?;
             let duration = seconds(duration)?;
             config.map.snapshot_path = out.clone();
             let runtime = tokio::runtime::Runtime::new()?;
-            let s = runtime.block_on(polymap::live::demo(&config, duration, vins_rate))?;
+            let s = runtime.block_on(polymap::runtime::demo::demo(&config, duration, vins_rate))?;
             println!("{s} in {}", out.display());
             let map: polymap::map::MapSnapshot = serde_json::from_str(&std::fs::read_to_string(&out)?)?;
             let seq = Sequence::open(&config.sources.depth.sequence)?;
@@ -328,7 +328,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::MockVins { seq, rate, drift, duration, config } => {
             let config = load_config(config, None)?;
             let s = Sequence::open(&seq)?;
-            let opts = polymap::mock_vins::MockVinsOptions {
+            let opts = polymap::mock::vins::MockVinsOptions {
                 rate_hz: rate,
                 drift_mm_per_s: drift,
                 duration: duration.map(seconds).transpose()?,
@@ -336,7 +336,7 @@ fn run(cli: Cli) -> Result<()> {
             let runtime = tokio::runtime::Runtime::new()?;
             let sent = runtime.block_on(async {
                 tokio::select! {
-                    r = polymap::mock_vins::run(&s, &config.zenoh, opts) => r,
+                    r = polymap::mock::vins::run(&s, &config, opts) => r,
                     _ = tokio::signal::ctrl_c() => Ok(0),
                 }
             })?;

@@ -36,7 +36,22 @@ pub fn save_snapshot(map: &mut PolygonMap, config: &Config) -> Result<()> {
     if path.as_os_str().is_empty() {
         return Ok(());
     }
-    persist::save(&map.snapshot(), path).with_context(|| format!("saving the map to {}", path.display()))
+    write_snapshot(&map.snapshot(), path)
+}
+
+/// Writes a snapshot atomically, the error naming the file.
+pub fn write_snapshot(snapshot: &crate::map::MapSnapshot, path: &Path) -> Result<()> {
+    persist::save(snapshot, path).with_context(|| format!("saving the map to {}", path.display()))
+}
+
+/// Removes the temporary files a crashed writer left beside the configured snapshot.
+pub fn remove_stale_snapshot_temps(config: &Config) {
+    let path = &config.map.snapshot_path;
+    if !path.as_os_str().is_empty() {
+        for stale in persist::remove_stale_temps(path) {
+            tracing::info!("removed {}, left by a write that never finished", stale.display());
+        }
+    }
 }
 
 /// Maps every frame of `seq` into `map`; `on_frame(k, update)` sees each frame's changes.

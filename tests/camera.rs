@@ -6,11 +6,11 @@ use std::collections::HashMap;
 use std::time::Duration;
 
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
-use polymap::camera::mock_d435i::{GRAVITY, MockD435i, Trajectory, ir_intrinsics};
 use polymap::camera::{
     CamOption, CameraError, D435iSample, DeviceEntry, DeviceOptions, ImuUniter, pick_device, stream_with_reconnect,
     switch_emitter_off,
 };
+use polymap::mock::d435i::{GRAVITY, MockD435i, Trajectory, ir_intrinsics};
 use polymap::synth::{Scene, SceneKind, path::trajectory, stamp_ns};
 
 /// A sensor's options as a map; `stuck` options ignore writes, as a faulty firmware would.

@@ -83,7 +83,8 @@ fn each_impossible_value_is_caught() {
         ("[sources.extrinsics]\nxyz = [0.0, inf, 0.0]", "sources.extrinsics.xyz", "finite"),
         ("[sources.depth]\nfps = 0", "sources.depth.fps", "within"),
         ("[sources.depth]\nsequence = \"\"", "sources.depth.sequence", "sequence directory"),
-        ("[zenoh]\nrobot = \"a/*\"", "zenoh.robot", "wildcards"),
+        ("[ros2]\nnamespace = \"a/*\"", "ros2.namespace", "ROS name"),
+        ("[ros2]\nnode = \"my node\"", "ros2.node", "node name"),
     ];
     for (text, key, why) in cases {
         let e = error(text);
@@ -129,4 +130,18 @@ fn cli_stops_on_a_bad_config_naming_file_and_key() {
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("bad.toml") && stderr.contains("map.merge_height_tolerance_m"), "{stderr}");
+}
+
+#[test]
+fn the_shipped_zenoh_configs_parse() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/zenoh");
+    let mut checked = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "json5") {
+            polymap::ros2::session::config(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            checked += 1;
+        }
+    }
+    assert!(checked >= 2, "{checked} configs in {}", dir.display());
 }

@@ -1,45 +1,25 @@
 //! End to end: the mock VINS and the mapper (`polymap run`, mock camera) as separate
-//! processes and Zenoh peers on loopback; this test, a third peer, receives frame polygons
-//! and map updates, queries the map and a foothold, and scores the map against the truth.
+//! processes and Zenoh peers on loopback; this test, a third peer and a ROS 2 node through
+//! polymap's own ROS 2 layer, receives frame polygons and map updates, calls the map and
+//! foothold services, and scores the map against the truth.
 
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-use polymap::map::{Label, MapPolygon, MapSnapshot};
-use polymap::ros::{self, FootholdMsg, FramePolygonsMsg, MapMsg, MapUpdateMsg, PolygonMsg};
+use polymap::config::Config;
+use polymap::interface::{Interface, convert};
+use polymap::map::{Label, MapSnapshot};
+use polymap::ros2::msg::{GetFootholdRequest, GetMapRequest, Point, Polygon};
+use polymap::ros2::session::{free_loopback_port, loopback, loopback_json5};
+use polymap::ros2::{Node, NodeOptions, RosName};
 use polymap::sequence::Sequence;
 
-fn json5(dir: &Path, name: &str, listen: Option<u16>, connect: Option<u16>) -> String {
+fn json5(dir: &Path, name: &str, listen: Option<u16>, connect: &[u16]) -> String {
     let path = dir.join(format!("{name}.json5"));
-    std::fs::write(&path, polymap::live::loopback_json5(listen, connect)).unwrap();
+    std::fs::write(&path, loopback_json5(listen, connect)).unwrap();
     path.display().to_string()
-}
-
-fn to_snapshot(m: &MapMsg) -> MapSnapshot {
-    let pt = |p: &ros::Point| [p.x, p.y, p.z];
-    let polygon = |p: &PolygonMsg| MapPolygon {
-        id: p.id,
-        label: serde_json::from_value(serde_json::Value::String(p.label.clone())).unwrap(),
-        normal: p.normal,
-        offset: p.offset,
-        area: p.area,
-        centroid: pt(&p.centroid),
-        boundary: p.boundary.iter().map(pt).collect(),
-        holes: p.holes.iter().map(|r| r.points.iter().map(pt).collect()).collect(),
-        convex_pieces: p.convex_pieces.iter().map(|r| r.points.iter().map(pt).collect()).collect(),
-        inset: p.inset.iter().map(pt).collect(),
-        observations: p.observations,
-        step: (p.step >= 0).then_some(p.step as u32),
-    };
-    MapSnapshot {
-        frame: "world".into(),
-        drift_z: m.drift_z,
-        drift_var: m.drift_var,
-        stair: None,
-        polygons: m.polygons.iter().map(polygon).collect(),
-    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -52,7 +32,7 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
     let seq_dir = dir.path().join("straight");
     let opts = polymap::synth::SynthOptions { frames: 180, seed: 4, ..Default::default() };
     polymap::synth::generate(&opts, &seq_dir, |_, _| {}).unwrap();
-    let port = polymap::live::free_loopback_port().unwrap();
+    let port = free_loopback_port().unwrap();
     let snapshot = dir.path().join("map.json");
     let mapper_cfg = dir.path().join("mapper.toml");
     std::fs::write(
@@ -61,12 +41,12 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
             "[sources.depth]\nsequence = {:?}\nfps = 8\n[pipeline]\nbackend = \"cpu\"\n[map]\nsnapshot_path = {:?}\n[zenoh]\nconfig_file = {:?}\n",
             seq_dir.display().to_string(),
             snapshot.display().to_string(),
-            json5(dir.path(), "mapper", Some(port), None)
+            json5(dir.path(), "mapper", Some(port), &[])
         ),
     )
     .unwrap();
     let vins_cfg = dir.path().join("vins.toml");
-    std::fs::write(&vins_cfg, format!("[zenoh]\nconfig_file = {:?}\n", json5(dir.path(), "vins", None, Some(port))))
+    std::fs::write(&vins_cfg, format!("[zenoh]\nconfig_file = {:?}\n", json5(dir.path(), "vins", None, &[port])))
         .unwrap();
     let bin = env!("CARGO_BIN_EXE_polymap");
     let mut mapper = std::process::Command::new(bin)
@@ -82,33 +62,32 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
         .spawn()
         .unwrap();
 
-    // This test is a third peer, connected to the mapper.
-    let me = polymap::config::ZenohConfig {
-        config_file: json5(dir.path(), "test", None, Some(port)).into(),
-        ..Default::default()
-    };
+    // This test is a third peer, connected to the mapper: a ROS 2 node of its own.
     let mut session = None;
     for _ in 0..100 {
         // The mapper may not be listening yet.
-        if let Ok(s) = polymap::bus::open_session(&me).await {
-            if s.info().peers_zid().await.next().is_some() {
-                session = Some(s);
-                break;
-            }
+        if let Ok(s) = polymap::ros2::session::open(loopback(None, &[port])).await
+            && s.info().peers_zid().await.next().is_some()
+        {
+            session = Some(s);
+            break;
         }
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
     let session = session.expect("the mapper's Zenoh peer never answered");
+    let config = Config::default();
+    let interface = Interface::new(&config);
+    let options = NodeOptions { namespace: RosName::root(), name: "live_test".into(), ..config.ros2.node_options() };
+    let node = Node::new(&session, options).await.unwrap();
     let (frames, updates) = (Arc::new(AtomicU64::new(0)), Arc::new(AtomicU64::new(0)));
     let f = frames.clone();
     // Which frames the mapper processed, by their stamps: the truth it is held to is what
     // those frames saw.
     let processed_stamps = Arc::new(std::sync::Mutex::new(Vec::new()));
     let ps = processed_stamps.clone();
-    let _frames_sub = session
-        .declare_subscriber("polymap/leju/frame/polygons")
-        .callback(move |s| {
-            let m: FramePolygonsMsg = ros::decode(&s.payload().to_bytes()).expect("frame polygons decode");
+    let _frames_sub = node
+        .subscribe(&interface.frame_polygons, move |m| {
+            let m = m.expect("frame polygons decode");
             ps.lock().unwrap().push(m.header.stamp.to_ns().expect("a valid stamp"));
             if !m.polygons.is_empty() {
                 f.fetch_add(1, Ordering::Relaxed);
@@ -117,10 +96,9 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
         .await
         .unwrap();
     let u = updates.clone();
-    let _updates_sub = session
-        .declare_subscriber("polymap/leju/map/updates")
-        .callback(move |s| {
-            let m: MapUpdateMsg = ros::decode(&s.payload().to_bytes()).expect("map update decode");
+    let _updates_sub = node
+        .subscribe(&interface.map_updates, move |m| {
+            let m = m.expect("map update decodes");
             u.fetch_add((m.added.len() + m.changed.len()) as u64, Ordering::Relaxed);
         })
         .await
@@ -128,13 +106,11 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
 
     let markers = Arc::new(AtomicU64::new(0));
     let mk = markers.clone();
-    let _markers_sub = session
-        .declare_subscriber("polymap/leju/markers")
-        .callback(move |s| {
-            let m: ros::MarkerArray = ros::decode(&s.payload().to_bytes()).expect("markers decode");
-            for marker in &m.markers {
-                assert_eq!(marker.ns, "polymap");
-                if marker.action == ros::MARKER_ADD {
+    let _markers_sub = node
+        .subscribe(&interface.markers, move |m| {
+            for marker in &m.expect("markers decode").markers {
+                assert_eq!(marker.ns, convert::MARKER_NS);
+                if marker.action == convert::MARKER_ADD {
                     assert!(
                         marker.points.len() >= 4 && marker.points.first() == marker.points.last(),
                         "a closed outline"
@@ -151,12 +127,12 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
     assert!(frames.load(Ordering::Relaxed) >= 10, "frame polygons arrive: {}", frames.load(Ordering::Relaxed));
     assert!(updates.load(Ordering::Relaxed) >= 10, "map updates arrive");
 
-    let replies = session.get("polymap/leju/map").await.unwrap();
-    let reply = replies.recv_async().await.expect("the map answers");
-    let map: MapMsg = ros::decode(&reply.result().expect("a map, not an error").payload().to_bytes()).unwrap();
-    let snap = to_snapshot(&map);
+    let get_map = node.client(&interface.get_map).await.unwrap();
+    let map = get_map.call(&GetMapRequest::default(), Duration::from_secs(5)).await.expect("the map answers").map;
+    let snap: MapSnapshot = convert::snapshot_of(&map);
+    assert_eq!(snap.polygons.len(), map.polygons.len(), "every label code is one polymap knows");
     let seq = Sequence::open(&seq_dir).unwrap();
-    let clock = polymap::mock_vins::SequenceClock::new(&seq).unwrap();
+    let clock = polymap::mock::SequenceClock::new(&seq).unwrap();
     let mut processed: Vec<usize> = processed_stamps
         .lock()
         .unwrap()
@@ -207,20 +183,26 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
 
     // A foothold at the middle of tread 2 (x 0.28..0.56, z 0.30) is a piece of that tread.
     let tread2 = scores.iter().find(|s| s.step == 2).and_then(|s| s.polygon).expect("tread 2 mapped");
-    let replies = session.get("polymap/leju/foothold?x=0.42;y=0.0;z=0.30").await.unwrap();
-    let reply = replies.recv_async().await.expect("the foothold answers");
-    let fh: FootholdMsg = ros::decode(&reply.result().expect("a foothold").payload().to_bytes()).unwrap();
+    let get_foothold = node.client(&interface.get_foothold).await.unwrap();
+    let request = GetFootholdRequest { point: Point { x: 0.42, y: 0.0, z: 0.30 } };
+    let fh = get_foothold.call(&request, Duration::from_secs(5)).await.expect("the foothold answers").foothold;
     assert!(fh.found && fh.contains, "{fh:?}");
     assert_eq!(fh.polygon_id, tread2);
-    assert_eq!(fh.label, "tread");
-    // A malformed foothold query gets an error that names what is wrong.
-    let replies = session.get("polymap/leju/foothold?x=oops").await.unwrap();
+    assert_eq!(fh.label, Polygon::LABEL_TREAD);
+    // A request that does not decode gets an error reply that says why.
+    let key = node.data_key(&polymap::ros2::graph::Endpoint {
+        name: &interface.get_foothold.name,
+        type_name: "polymap_msgs/srv/GetFoothold",
+        type_hash: &polymap::ros2::types::service_hash::<polymap::ros2::msg::GetFoothold>(),
+    });
+    let replies = session.get(key).payload(vec![0u8, 1, 0, 0, 1]).await.unwrap();
     let reply = replies.recv_async().await.expect("an answer");
-    let err = reply.result().err().expect("an error reply");
-    assert!(String::from_utf8_lossy(&err.payload().to_bytes()).contains("x, y and z"));
+    let err = reply.result().expect_err("an error reply");
+    assert!(String::from_utf8_lossy(&err.payload().to_bytes()).contains("does not decode"));
 
     let status = tokio::task::spawn_blocking(move || mapper.wait()).await.unwrap().unwrap();
     let _ = vins.kill();
+    let _ = vins.wait();
     let log = std::fs::read_to_string(dir.path().join("mapper.log")).unwrap();
     assert!(status.success(), "{log}");
     assert!(log.contains("latency median"), "live status is printed: {log}");

@@ -127,7 +127,7 @@ fn a_missing_camera_is_named_in_the_error() {
 /// trajectory covers): IR pairs at 30 Hz (320x240), gyro at 200 Hz and accel at 63 Hz on
 /// clocks of their own, as a D435i's motion module samples them.
 fn d435i_recording() -> D435iRecording {
-    use polymap::camera::mock_d435i::MockD435i;
+    use polymap::mock::d435i::MockD435i;
     let seq = Sequence::open(root().join("mock_frames/straight_320")).unwrap();
     let cfg = D435iConfig { ir_width: 320, ir_height: 240, ..D435iConfig::default() };
     let mock = MockD435i::from_sequence(&seq, &nalgebra::Isometry3::identity(), &cfg).unwrap();

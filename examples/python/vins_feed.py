@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
 """What VINS-Fusion gets from polymap's D435i (real or mock): the IR pair, their camera
-infos and the united IMU, as realsense-ros publishes them, decoded with rosbags.
+infos and the united IMU on realsense-ros's topics, received as a ROS 2 node on rmw_zenoh
+receives them (rmw_zenoh.py beside this file) and decoded with rosbags.
 
     pip install eclipse-zenoh==1.10.2 rosbags==0.11.9
-    python3 examples/python/vins_feed.py [--connect tcp/127.0.0.1:7447] [--prefix camera/camera]
+    python3 examples/python/vins_feed.py [--connect tcp/127.0.0.1:7447] [--namespace /camera/camera]
 
 Prints one JSON object summarising what arrived; exits non-zero if a stream is missing
 within the timeout.
@@ -11,11 +12,11 @@ within the timeout.
 
 import argparse
 import json
+import queue
 import sys
 import time
 
-import zenoh
-from rosbags.typesys import Stores, get_typestore
+from rmw_zenoh import Peer, connect_from_env
 
 TYPES = {
     "imu": "sensor_msgs/msg/Imu",
@@ -45,42 +46,42 @@ def summary(topic, m):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--connect", default="tcp/127.0.0.1:7447")
-    ap.add_argument("--prefix", default="camera/camera")
+    ap.add_argument("--connect", default=connect_from_env())
+    ap.add_argument("--namespace", default="/camera/camera")
     ap.add_argument("--imu", type=int, default=100, help="IMU samples to wait for")
     ap.add_argument("--timeout", type=float, default=20.0)
     args = ap.parse_args()
 
-    store = get_typestore(Stores.ROS2_HUMBLE)
-    conf = zenoh.Config.from_json5(json.dumps({
-        "mode": "peer",
-        "connect": {"endpoints": [args.connect]},
-        "listen": {"endpoints": ["tcp/127.0.0.1:0"]},
-        "scouting": {"multicast": {"enabled": False}},
-    }))
-    first, imu = {}, []
-    with zenoh.open(conf) as session:
-        sub = session.declare_subscriber(f"{args.prefix}/**")
-        deadline = time.time() + args.timeout
-        while (len(first) < len(TYPES) or len(imu) < args.imu) and time.time() < deadline:
-            sample = sub.try_recv()
-            if sample is None:
-                time.sleep(0.01)
-                continue
-            topic = str(sample.key_expr)[len(args.prefix) + 1:]
-            if topic not in TYPES:
-                continue
-            m = store.deserialize_cdr(sample.payload.to_bytes(), TYPES[topic])
-            s = summary(topic, m)
-            if topic == "imu":
-                imu.append(s)
-            first.setdefault(topic, s)
+    with Peer(args.connect, node="vins_estimator") as peer:
+        return run(peer, args)
+
+
+def run(peer, args):
+    received = queue.Queue()
+    for topic, typename in TYPES.items():
+        peer.subscribe(f"{args.namespace}/{topic}", typename,
+                       lambda m, att, topic=topic: received.put((topic, m, att)))
+    first, imu, attachments = {}, [], {}
+    deadline = time.time() + args.timeout
+    while (len(first) < len(TYPES) or len(imu) < args.imu) and time.time() < deadline:
+        try:
+            topic, m, att = received.get(timeout=0.1)
+        except queue.Empty:
+            continue
+        s = summary(topic, m)
+        if topic == "imu":
+            imu.append(s)
+        first.setdefault(topic, s)
+        attachments.setdefault(topic, []).append(att)
     stamps = [s["stamp"] for s in imu]
     out = {
         "streams": first,
         "imu_count": len(imu),
         "imu_rate_hz": (len(stamps) - 1) / (stamps[-1] - stamps[0]) if len(stamps) > 1 and stamps[-1] > stamps[0] else 0.0,
         "imu_mean_accel_norm": sum(sum(v * v for v in s["accel"]) ** 0.5 for s in imu) / max(len(imu), 1),
+        # rmw_zenoh's attachment on every sample: sequence numbers counting up per publisher.
+        "attachments_ok": {t: all(a is not None for a in atts) and all(
+            b[0] > a[0] for a, b in zip(atts, atts[1:]) if a[2] == b[2]) for t, atts in attachments.items()},
     }
     print(json.dumps(out))
     return 0 if len(first) == len(TYPES) and len(imu) >= args.imu else 1

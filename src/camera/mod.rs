@@ -8,9 +8,7 @@
 //! - [`ImuUniter`]: gyro + accel into one stream, as realsense-ros's `unite_imu_method:=2`.
 //! - [`stream_with_reconnect`]: frames until the cable goes, then retries with backoff
 //!   until the camera is back.
-//! - [`mock_d435i`]: IR images and IMU from a sequence's trajectory, no librealsense.
 
-pub mod mock_d435i;
 #[cfg(feature = "realsense")]
 pub mod realsense;
 

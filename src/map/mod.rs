@@ -10,6 +10,7 @@
 
 pub mod convex;
 pub mod drift;
+pub mod foothold;
 pub mod geometry;
 pub mod labels;
 pub mod persist;

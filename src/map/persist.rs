@@ -8,23 +8,54 @@ use std::path::{Path, PathBuf};
 
 use super::MapSnapshot;
 
-/// Writes `snapshot` to `path` atomically.
+/// Writes `snapshot` to `path` atomically. A write that fails (a full disk, a read-only
+/// directory) leaves no temporary file behind and the previous snapshot as it was.
 pub fn save(snapshot: &MapSnapshot, path: &Path) -> std::io::Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
-        _ => PathBuf::from("."),
-    };
+    let dir = directory_of(path);
     std::fs::create_dir_all(&dir)?;
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "map.json".into());
-    let tmp = dir.join(format!(".{name}.tmp.{}", std::process::id()));
-    {
+    let tmp = dir.join(format!("{}{}", temp_prefix(path), std::process::id()));
+    let written = (|| {
         let mut f = File::create(&tmp)?;
         f.write_all(&serde_json::to_vec(snapshot).map_err(std::io::Error::other)?)?;
         f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
     }
-    std::fs::rename(&tmp, path)?;
+    written?;
     // The rename itself is durable once the directory is synced.
     File::open(&dir)?.sync_all()
+}
+
+fn directory_of(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// Temporary files of `path` are `.<name>.tmp.<pid>` beside it.
+fn temp_prefix(path: &Path) -> String {
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "map.json".into());
+    format!(".{name}.tmp.")
+}
+
+/// Removes the temporary files of `path` that writers no longer running left behind (a
+/// crash or kill -9 mid-write); returns what it removed.
+pub fn remove_stale_temps(path: &Path) -> Vec<PathBuf> {
+    let prefix = temp_prefix(path);
+    let Ok(entries) = std::fs::read_dir(directory_of(path)) else { return Vec::new() };
+    let mut removed = Vec::new();
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let Some(pid) = name.strip_prefix(&prefix).and_then(|p| p.parse::<u32>().ok()) else { continue };
+        let running = pid == std::process::id() || Path::new(&format!("/proc/{pid}")).exists();
+        if !running && std::fs::remove_file(entry.path()).is_ok() {
+            removed.push(entry.path());
+        }
+    }
+    removed
 }
 
 /// Why a map file could not be loaded.

@@ -11,7 +11,7 @@
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
-use super::{D435iSample, ImuSample};
+use crate::camera::{D435iSample, ImuSample};
 use crate::synth::Scene;
 use crate::types::{Intrinsics, StampNs};
 
@@ -191,13 +191,13 @@ impl MockD435i {
     /// renders run beside the IMU so they never hold it up. Stops when the receiver goes away.
     pub async fn run(
         self,
-        clock: crate::mock_vins::SequenceClock,
+        clock: super::SequenceClock,
         cfg: &crate::config::D435iConfig,
         tx: tokio::sync::mpsc::Sender<D435iSample>,
     ) {
         let mock = std::sync::Arc::new(self);
         let clock = std::sync::Arc::new(clock);
-        let start = (tokio::time::Instant::now(), crate::mock_vins::now_ns());
+        let start = (tokio::time::Instant::now(), crate::clock::now_ns());
         let imu = {
             let (mock, clock, tx) = (mock.clone(), clock.clone(), tx.clone());
             every(start, cfg.gyro_hz as f64, move |t| {

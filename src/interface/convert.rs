@@ -1,0 +1,315 @@
+//! Conversions between polymap's own types and its ROS messages, both ways, in one place.
+
+use crate::camera::ImuSample;
+use crate::map::{Label, MapPolygon, MapSnapshot};
+use crate::pose::RawPose;
+use crate::ros2::msg::{
+    self, ColorRgba, Duration, FramePolygons, Header, Image, Imu, Map, MapUpdate, Marker, MarkerArray, Odometry, Point,
+    Pose, PoseStamped, PoseWithCovariance, Quaternion, Ring, Time, TwistWithCovariance, Vector3,
+};
+use crate::types::{Intrinsics, StampNs};
+
+fn ring(r: &[[f64; 3]]) -> Ring {
+    Ring { points: r.iter().map(|&p| p.into()).collect() }
+}
+
+fn points(r: &[Point]) -> Vec<[f64; 3]> {
+    r.iter().map(|p| [p.x, p.y, p.z]).collect()
+}
+
+pub fn header(stamp_ns: StampNs, frame_id: &str) -> Header {
+    Header { stamp: Time::from_ns(stamp_ns), frame_id: frame_id.into() }
+}
+
+/// A label as polymap_msgs/Polygon's `LABEL_*` constant.
+pub fn label_code(label: Label) -> u8 {
+    match label {
+        Label::Floor => msg::Polygon::LABEL_FLOOR,
+        Label::Tread => msg::Polygon::LABEL_TREAD,
+        Label::Landing => msg::Polygon::LABEL_LANDING,
+        Label::Riser => msg::Polygon::LABEL_RISER,
+        Label::Wall => msg::Polygon::LABEL_WALL,
+        Label::Slope => msg::Polygon::LABEL_SLOPE,
+    }
+}
+
+/// The label a `LABEL_*` constant names (None for LABEL_NONE or an unknown code).
+pub fn label_of(code: u8) -> Option<Label> {
+    [Label::Floor, Label::Tread, Label::Landing, Label::Riser, Label::Wall, Label::Slope]
+        .into_iter()
+        .find(|&l| label_code(l) == code)
+}
+
+/// A map polygon as planners get it.
+pub fn map_polygon(p: &MapPolygon) -> msg::Polygon {
+    msg::Polygon {
+        id: p.id,
+        label: label_code(p.label),
+        step: p.step.map_or(-1, |s| s as i32),
+        normal: p.normal,
+        offset: p.offset,
+        area: p.area,
+        centroid: p.centroid.into(),
+        boundary: p.boundary.iter().map(|&v| v.into()).collect(),
+        holes: p.holes.iter().map(|h| ring(h)).collect(),
+        convex_pieces: p.convex_pieces.iter().map(|h| ring(h)).collect(),
+        inset: p.inset.iter().map(|&v| v.into()).collect(),
+        observations: p.observations,
+    }
+}
+
+/// A map polygon back from its message; None for a label code polymap never sends.
+pub fn map_polygon_of(p: &msg::Polygon) -> Option<MapPolygon> {
+    Some(MapPolygon {
+        id: p.id,
+        label: label_of(p.label)?,
+        normal: p.normal,
+        offset: p.offset,
+        area: p.area,
+        centroid: [p.centroid.x, p.centroid.y, p.centroid.z],
+        boundary: points(&p.boundary),
+        holes: p.holes.iter().map(|r| points(&r.points)).collect(),
+        convex_pieces: p.convex_pieces.iter().map(|r| points(&r.points)).collect(),
+        inset: points(&p.inset),
+        observations: p.observations,
+        step: (p.step >= 0).then_some(p.step as u32),
+    })
+}
+
+/// One frame's extracted polygon (not labelled, seen once).
+pub fn frame_polygon(p: &crate::extract::Polygon) -> msg::Polygon {
+    msg::Polygon {
+        id: p.id as u64,
+        label: msg::Polygon::LABEL_NONE,
+        step: -1,
+        normal: p.normal,
+        offset: p.offset,
+        area: p.area,
+        centroid: p.centroid().into(),
+        boundary: p.boundary.iter().map(|&v| v.into()).collect(),
+        holes: p.holes.iter().map(|h| ring(h)).collect(),
+        observations: 1,
+        ..msg::Polygon::default()
+    }
+}
+
+pub fn frame_polygons(stamp_ns: StampNs, frame_id: &str, polygons: &[crate::extract::Polygon]) -> FramePolygons {
+    FramePolygons { header: header(stamp_ns, frame_id), polygons: polygons.iter().map(frame_polygon).collect() }
+}
+
+/// What one frame changed, as polygons whole.
+pub struct MapDelta<'a> {
+    pub stamp_ns: StampNs,
+    pub added: &'a [MapPolygon],
+    pub changed: &'a [MapPolygon],
+    pub removed: &'a [u64],
+    pub drift_z: f64,
+    pub drift_var: f64,
+}
+
+pub fn map_update(d: &MapDelta, frame_id: &str) -> MapUpdate {
+    MapUpdate {
+        header: header(d.stamp_ns, frame_id),
+        added: d.added.iter().map(map_polygon).collect(),
+        changed: d.changed.iter().map(map_polygon).collect(),
+        removed: d.removed.to_vec(),
+        drift_z: d.drift_z,
+        drift_var: d.drift_var,
+    }
+}
+
+pub fn map(s: &MapSnapshot, stamp_ns: StampNs) -> Map {
+    Map {
+        header: header(stamp_ns, &s.frame),
+        drift_z: s.drift_z,
+        drift_var: s.drift_var,
+        polygons: s.polygons.iter().map(map_polygon).collect(),
+    }
+}
+
+/// The map a client received; polygons with a label code it does not know are left out.
+pub fn snapshot_of(m: &Map) -> MapSnapshot {
+    MapSnapshot {
+        frame: m.header.frame_id.clone(),
+        drift_z: m.drift_z,
+        drift_var: m.drift_var,
+        stair: None,
+        polygons: m.polygons.iter().filter_map(map_polygon_of).collect(),
+    }
+}
+
+pub fn foothold(f: &crate::map::foothold::Foothold, stamp_ns: StampNs, frame_id: &str) -> msg::Foothold {
+    let header = header(stamp_ns, frame_id);
+    match f {
+        None => msg::Foothold { header, ..msg::Foothold::default() },
+        Some(f) => msg::Foothold {
+            header,
+            found: true,
+            contains: f.distance == 0.0,
+            polygon_id: f.polygon.id,
+            label: label_code(f.polygon.label),
+            normal: f.polygon.normal,
+            offset: f.polygon.offset,
+            piece: f.piece.iter().map(|&v| v.into()).collect(),
+            distance: f.distance,
+        },
+    }
+}
+
+pub fn status(r: &crate::runtime::status::Report, stamp_ns: StampNs, frame_id: &str) -> msg::Status {
+    msg::Status {
+        header: header(stamp_ns, frame_id),
+        frames_in: r.frames_in,
+        frames_processed: r.processed,
+        frames_dropped: r.dropped,
+        frames_without_pose: r.without_pose,
+        frames_not_extracted: r.extraction_failed,
+        latency_median_ms: r.latency.median,
+        latency_p99_ms: r.latency.p99,
+        poses_accepted: r.poses.accepted,
+        poses_refused: r.poses.rejected + r.poses.undecodable,
+        requests_refused: r.requests_refused,
+        snapshots_failed: r.snapshots_failed,
+        drift_z: r.drift_z,
+        map_polygons: r.map_polygons.min(u32::MAX as usize) as u32,
+    }
+}
+
+// RViz markers.
+
+pub const MARKER_LINE_STRIP: i32 = 4;
+pub const MARKER_ADD: i32 = 0;
+pub const MARKER_DELETE: i32 = 2;
+/// The namespace polymap's markers live in.
+pub const MARKER_NS: &str = "polymap";
+
+fn marker(header: &Header, id: u64, action: i32) -> Marker {
+    Marker {
+        header: header.clone(),
+        ns: MARKER_NS.into(),
+        // RViz ids are int32; map ids count up from 1 and stay far below 2^31.
+        id: (id & 0x7fff_ffff) as i32,
+        r#type: MARKER_LINE_STRIP,
+        action,
+        pose: Pose::default(),
+        scale: Vector3 { x: 0.01, y: 0.0, z: 0.0 },
+        color: ColorRgba::default(),
+        lifetime: Duration::default(),
+        frame_locked: false,
+        points: Vec::new(),
+        colors: Vec::new(),
+        texture_resource: String::new(),
+        texture: msg::CompressedImage::default(),
+        uv_coordinates: Vec::new(),
+        text: String::new(),
+        mesh_resource: String::new(),
+        mesh_file: msg::MeshFile::default(),
+        mesh_use_embedded_materials: false,
+    }
+}
+
+/// Markers for changed polygons (each outline a closed line strip in its label's colour, as
+/// the top-down picture draws it) and a delete for each removed one.
+pub fn markers(header: &Header, polygons: &[&msg::Polygon], removed: &[u64]) -> MarkerArray {
+    let mut markers: Vec<Marker> = polygons
+        .iter()
+        .map(|p| {
+            let mut m = marker(header, p.id, MARKER_ADD);
+            let [r, g, b] = label_of(p.label)
+                .map(|l| crate::map::render::label_colour(l, (p.step >= 0).then_some(p.step as u32)).0)
+                .unwrap_or([200, 200, 200]);
+            m.color = ColorRgba { r: r as f32 / 255.0, g: g as f32 / 255.0, b: b as f32 / 255.0, a: 1.0 };
+            m.points = p.boundary.clone();
+            m.points.extend(p.boundary.first().copied());
+            m
+        })
+        .collect();
+    markers.extend(removed.iter().map(|&id| marker(header, id, MARKER_DELETE)));
+    MarkerArray { markers }
+}
+
+pub fn update_markers(u: &MapUpdate) -> MarkerArray {
+    markers(&u.header, &u.added.iter().chain(&u.changed).collect::<Vec<_>>(), &u.removed)
+}
+
+// The D435i, as realsense-ros publishes it.
+
+/// The IR image of infra`index`.
+pub fn ir_image(stamp_ns: StampNs, index: u8, intr: &Intrinsics, pixels: Vec<u8>) -> Image {
+    Image {
+        header: header(stamp_ns, &format!("camera_infra{index}_optical_frame")),
+        height: intr.height,
+        width: intr.width,
+        encoding: "mono8".into(),
+        is_bigendian: 0,
+        step: intr.width,
+        data: pixels,
+    }
+}
+
+/// The CameraInfo beside it: rectified images, so no distortion and R = I; infra2's
+/// projection carries the baseline (P[3] = -fx * baseline), as realsense-ros writes it.
+pub fn ir_camera_info(stamp_ns: StampNs, index: u8, intr: &Intrinsics, baseline_m: f64) -> msg::CameraInfo {
+    let (fx, fy, cx, cy) = (intr.fx, intr.fy, intr.cx, intr.cy);
+    let tx = if index == 2 { -fx * baseline_m } else { 0.0 };
+    msg::CameraInfo {
+        header: header(stamp_ns, &format!("camera_infra{index}_optical_frame")),
+        height: intr.height,
+        width: intr.width,
+        distortion_model: "plumb_bob".into(),
+        d: vec![0.0; 5],
+        k: [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
+        r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        p: [fx, 0.0, cx, tx, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0],
+        binning_x: 0,
+        binning_y: 0,
+        roi: msg::RegionOfInterest::default(),
+    }
+}
+
+/// One united IMU sample: no orientation (covariance[0] = -1, the ROS convention), and the
+/// configured variances on the rates' diagonals.
+pub fn imu(sample: &ImuSample, angular_velocity_cov: f64, linear_accel_cov: f64) -> Imu {
+    let diagonal = |c: f64| [c, 0.0, 0.0, 0.0, c, 0.0, 0.0, 0.0, c];
+    Imu {
+        header: header(sample.stamp_ns, "camera_imu_optical_frame"),
+        orientation: Quaternion::default(),
+        orientation_covariance: [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        angular_velocity: sample.gyro.into(),
+        angular_velocity_covariance: diagonal(angular_velocity_cov),
+        linear_acceleration: sample.accel.into(),
+        linear_acceleration_covariance: diagonal(linear_accel_cov),
+    }
+}
+
+// Odometry: VINS's out, polymap's in.
+
+fn raw_pose(header: &Header, pose: &Pose) -> Result<RawPose, String> {
+    let stamp_ns = header.stamp.to_ns().ok_or_else(|| format!("stamp {:?} is not a time", header.stamp))?;
+    let (p, q) = (pose.position, pose.orientation);
+    Ok(RawPose { stamp_ns, position: [p.x, p.y, p.z], quat_xyzw: [q.x, q.y, q.z, q.w] })
+}
+
+/// The pose an Odometry message carries (not yet checked: the pose buffer does that).
+pub fn pose_of_odometry(m: &Odometry) -> Result<RawPose, String> {
+    raw_pose(&m.header, &m.pose.pose)
+}
+
+pub fn pose_of_pose_stamped(m: &PoseStamped) -> Result<RawPose, String> {
+    raw_pose(&m.header, &m.pose)
+}
+
+/// An Odometry message of a pose, as VINS sends it.
+pub fn odometry(pose: &RawPose, frame_id: &str, child_frame_id: &str) -> Odometry {
+    let [x, y, z] = pose.position;
+    let [qx, qy, qz, qw] = pose.quat_xyzw;
+    Odometry {
+        header: header(pose.stamp_ns, frame_id),
+        child_frame_id: child_frame_id.into(),
+        pose: PoseWithCovariance {
+            pose: Pose { position: Point { x, y, z }, orientation: Quaternion { x: qx, y: qy, z: qz, w: qw } },
+            covariance: [0.0; 36],
+        },
+        twist: TwistWithCovariance::default(),
+    }
+}

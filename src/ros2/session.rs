@@ -1,0 +1,108 @@
+//! Opening the Zenoh session, from the one place every process of polymap (and its tests and
+//! examples) gets its config:
+//!
+//! 1. `zenoh.config_file` when the config names one;
+//! 2. else `ZENOH_SESSION_CONFIG_URI` (rmw_zenoh's variable) or `ZENOH_CONFIG` (Zenoh's);
+//! 3. else rmw_zenoh's own session defaults: a peer that connects to the rmw_zenohd router on
+//!    this machine (tcp/localhost:7447), listens on loopback only, multicast scouting off,
+//!    gossip on, timestamps on.
+//!
+//! `ZENOH_CONFIG_OVERRIDE` (`key=json5;key=json5`, as rmw_zenoh reads it) then changes
+//! single keys of whichever it was.
+
+use std::path::Path;
+
+use super::Ros2Error;
+
+/// rmw_zenoh's variable naming the session config file.
+pub const SESSION_CONFIG_URI: &str = "ZENOH_SESSION_CONFIG_URI";
+/// Zenoh's variable naming a config file.
+pub const ZENOH_CONFIG: &str = "ZENOH_CONFIG";
+/// rmw_zenoh's per-key overrides.
+pub const CONFIG_OVERRIDE: &str = "ZENOH_CONFIG_OVERRIDE";
+
+/// The rmw_zenohd router's endpoint on this machine.
+pub const ROUTER_ON_THIS_MACHINE: &str = "tcp/localhost:7447";
+
+/// The session config: from `file` (if not empty), else from the environment, else
+/// rmw_zenoh's defaults; then the environment's overrides.
+pub fn config(file: &Path) -> Result<zenoh::Config, Ros2Error> {
+    let from_env =
+        [SESSION_CONFIG_URI, ZENOH_CONFIG].iter().find_map(|v| std::env::var(v).ok().filter(|s| !s.is_empty()));
+    let mut config = if !file.as_os_str().is_empty() {
+        from_file(file)?
+    } else if let Some(path) = from_env {
+        from_file(Path::new(&path))?
+    } else {
+        rmw_zenoh_defaults()
+    };
+    if let Ok(overrides) = std::env::var(CONFIG_OVERRIDE) {
+        for pair in overrides.split(';').map(str::trim).filter(|p| !p.is_empty()) {
+            let Some((key, value)) = pair.split_once('=') else {
+                return Err(Ros2Error::zenoh(CONFIG_OVERRIDE, format!("{pair:?} is not key=value")));
+            };
+            config
+                .insert_json5(key.trim(), value.trim())
+                .map_err(|e| Ros2Error::zenoh(format!("{CONFIG_OVERRIDE}: {key}"), e))?;
+        }
+    }
+    Ok(config)
+}
+
+fn from_file(path: &Path) -> Result<zenoh::Config, Ros2Error> {
+    // Zenoh reads the whole file: refuse what cannot be a config (/dev/zero, a huge file).
+    const MAX_BYTES: u64 = 1 << 20;
+    let meta = std::fs::metadata(path).map_err(|e| Ros2Error::zenoh(format!("zenoh config {}", path.display()), e))?;
+    if !meta.is_file() || meta.len() > MAX_BYTES {
+        return Err(Ros2Error::zenoh(
+            format!("zenoh config {}", path.display()),
+            format!("not a regular file of at most {MAX_BYTES} bytes"),
+        ));
+    }
+    zenoh::Config::from_file(path).map_err(|e| Ros2Error::zenoh(format!("zenoh config {}", path.display()), e))
+}
+
+fn parse(json: serde_json::Value) -> zenoh::Config {
+    zenoh::Config::from_json5(&json.to_string()).expect("Zenoh's own keys")
+}
+
+/// rmw_zenoh's `DEFAULT_RMW_ZENOH_SESSION_CONFIG.json5`: the keys that differ from Zenoh's.
+pub fn rmw_zenoh_defaults() -> zenoh::Config {
+    parse(serde_json::json!({
+        "mode": "peer",
+        "connect": { "endpoints": [ROUTER_ON_THIS_MACHINE] },
+        "listen": { "endpoints": ["tcp/localhost:0"] },
+        "scouting": { "multicast": { "enabled": false }, "gossip": { "enabled": true } },
+        "timestamping": { "enabled": true },
+    }))
+}
+
+/// A peer on loopback only, multicast off, listening on port `listen` (any, if None) and
+/// connecting to the peers on `connect`: as the text of a JSON5 config file, for a process
+/// started with one (the tests, `polymap demo`).
+pub fn loopback_json5(listen: Option<u16>, connect: &[u16]) -> String {
+    let endpoint = |p: u16| format!("tcp/127.0.0.1:{p}");
+    serde_json::json!({
+        "mode": "peer",
+        "listen": { "endpoints": [endpoint(listen.unwrap_or(0))] },
+        "connect": { "endpoints": connect.iter().map(|&p| endpoint(p)).collect::<Vec<_>>() },
+        "scouting": { "multicast": { "enabled": false } },
+        "timestamping": { "enabled": true },
+    })
+    .to_string()
+}
+
+/// The same as a config.
+pub fn loopback(listen: Option<u16>, connect: &[u16]) -> zenoh::Config {
+    zenoh::Config::from_json5(&loopback_json5(listen, connect)).expect("Zenoh's own keys")
+}
+
+/// Opens a session with `config`.
+pub async fn open(config: zenoh::Config) -> Result<zenoh::Session, Ros2Error> {
+    zenoh::open(config).await.map_err(|e| Ros2Error::zenoh("opening the session", e))
+}
+
+/// A TCP port on 127.0.0.1 that nothing listens on now.
+pub fn free_loopback_port() -> std::io::Result<u16> {
+    Ok(std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
+}

@@ -1,0 +1,45 @@
+//! `polymap demo`: the whole loop on one machine. The mock VINS and the mapper run as two
+//! Zenoh peers on loopback; the mapper listens where ROS 2 nodes and the README's clients
+//! expect a router on this machine (tcp/127.0.0.1:7447) when that port is free, and says
+//! where it listens.
+
+use std::time::Duration;
+
+use anyhow::Result;
+
+use super::RunSummary;
+use crate::config::Config;
+use crate::ros2::session::{free_loopback_port, loopback_json5};
+use crate::sequence::Sequence;
+
+/// The port rmw_zenoh's router listens on, where clients look first.
+pub const ROUTER_PORT: u16 = 7447;
+
+/// Runs for `duration`; the map is saved where `config.map.snapshot_path` says.
+pub async fn demo(config: &Config, duration: Duration, vins_rate_hz: f64) -> Result<RunSummary> {
+    let port = if std::net::TcpListener::bind(("127.0.0.1", ROUTER_PORT)).is_ok() {
+        ROUTER_PORT
+    } else {
+        free_loopback_port()?
+    };
+    let dir = tempfile::tempdir()?;
+    let write = |name: &str, text: String| -> Result<std::path::PathBuf> {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text)?;
+        Ok(path)
+    };
+    let mut mapper = config.clone();
+    mapper.zenoh.config_file = write("mapper.json5", loopback_json5(Some(port), &[]))?;
+    let mut vins = config.clone();
+    vins.zenoh.config_file = write("vins.json5", loopback_json5(None, &[port]))?;
+    println!("polymap demo: clients connect to tcp/127.0.0.1:{port} (ROS 2 namespace {})", config.ros2.namespace);
+    let seq = Sequence::open(&config.sources.depth.sequence)?;
+    let opts = crate::mock::vins::MockVinsOptions { rate_hz: vins_rate_hz, drift_mm_per_s: 0.0, duration: None };
+    let vins_task = tokio::spawn(async move { crate::mock::vins::run(&seq, &vins, opts).await });
+    let summary = super::run(&mapper, Some(duration)).await;
+    vins_task.abort();
+    if let Ok(Err(e)) = vins_task.await {
+        tracing::error!("mock VINS: {e:#}");
+    }
+    summary
+}

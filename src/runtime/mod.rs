@@ -1,0 +1,199 @@
+//! `polymap run`: the live mapper, and `polymap demo`, the whole loop on one machine.
+//!
+//! ```text
+//! depth source ─► newest-frame slot ─► extractor thread (extract, pose at the frame's stamp,
+//!   map update) ─► FrameEvent ─► publisher ─► frame_polygons, map_updates, markers
+//! odometry subscription ─► pose buffer      services: get_map, get_foothold      status: 1 Hz
+//! D435i (mock or real) ─► infra1, infra2, imu for VINS
+//! ```
+//!
+//! - [`slot`]: the newest-frame slot; [`worker`]: the extractor thread;
+//! - [`sources`]: the depth source and the D435i streams; [`odometry`]: poses in;
+//! - [`publish`]: what the worker made, out; [`services`]: the map and footholds on request;
+//! - [`status`]: counters and the status line; [`demo`]: mock VINS and mapper together.
+//!
+//! When extraction falls behind, the newest frame wins. A frame with no odometry pose within
+//! the gap is skipped and counted. SIGINT / SIGTERM (or `--duration`) stop it; the map is
+//! saved. A snapshot that cannot be written is logged, counted and tried again next period.
+
+pub mod demo;
+pub mod odometry;
+pub mod publish;
+pub mod services;
+pub mod slot;
+pub mod sources;
+pub mod status;
+pub mod worker;
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use anyhow::{Context, Result, anyhow, bail};
+use parking_lot::Mutex;
+
+use crate::clock::now_ns;
+use crate::config::Config;
+use crate::interface::Interface;
+use crate::map::PolygonMap;
+use crate::pose::PoseBuffer;
+use crate::ros2::Node;
+use status::Counters;
+use worker::{FrameEvent, WorkerEnd};
+
+/// What `run` did, for the caller's last words.
+#[derive(Clone, Debug)]
+pub struct RunSummary {
+    pub frames_in: u64,
+    pub processed: u64,
+    pub dropped: u64,
+    pub without_pose: u64,
+    pub map_polygons: usize,
+    /// Frame stamp to published, over the whole run, ms.
+    pub latency: crate::bench::Spread,
+}
+
+impl std::fmt::Display for RunSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} frames in, {} processed, {} dropped, {} without pose; frame-to-published latency median {:.1} ms, p99 {:.1} ms; map of {} polygons",
+            self.frames_in,
+            self.processed,
+            self.dropped,
+            self.without_pose,
+            self.latency.median,
+            self.latency.p99,
+            self.map_polygons
+        )
+    }
+}
+
+/// Runs until SIGINT / SIGTERM or `duration`; saves the map at the end.
+pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSummary> {
+    let seq = sources::mock_sequence(config)?;
+    crate::replay::remove_stale_snapshot_temps(config);
+    let session = crate::ros2::session::open(crate::ros2::session::config(&config.zenoh.config_file)?).await?;
+    let node = Arc::new(Node::new(&session, config.ros2.node_options()).await?);
+    let interface = Interface::new(config);
+    let gap_ns = (config.poses.max_gap_s * 1e9) as u64;
+    let poses = Arc::new(Mutex::new(PoseBuffer::new(4096, gap_ns)));
+    let _odometry = odometry::subscribe(&node, &interface, poses.clone()).await?;
+    let map = Arc::new(Mutex::new(crate::replay::initial_map(config)));
+    let counters = Arc::new(Counters::default());
+    let stop = Arc::new(AtomicBool::new(false));
+    let slot = Arc::new(slot::Slot::default());
+    let (events_tx, mut events) = tokio::sync::mpsc::channel::<FrameEvent>(8);
+    let shared = worker::Shared {
+        slot: slot.clone(),
+        stop: stop.clone(),
+        poses: poses.clone(),
+        map: map.clone(),
+        counters: counters.clone(),
+    };
+    let worker = worker::spawn(config, shared, events_tx)?;
+    let camera = sources::start_depth(config, seq.as_ref(), slot, stop.clone(), counters.clone()).await?;
+    let d435i = sources::start_d435i(config, seq.as_ref(), node.clone(), &interface, stop.clone()).await?;
+    let _services = services::serve(&node, &interface, map.clone(), counters.clone()).await?;
+    let publishers = publish::Publishers::new(&node, &interface).await?;
+    tracing::info!(
+        "polymap {} on ROS 2 ({:?}, domain {})",
+        config.ros2.namespace,
+        config.ros2.mode(),
+        config.ros2.domain_id
+    );
+
+    let mut latencies: Vec<f64> = Vec::new();
+    let mut all_latencies: Vec<f64> = Vec::new();
+    let mut status_tick = tokio::time::interval(Duration::from_secs(1));
+    let mut snapshot_tick = tokio::time::interval(Duration::from_secs_f64(config.map.snapshot_period_s));
+    snapshot_tick.tick().await;
+    let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+    let deadline = async {
+        match duration {
+            Some(d) => tokio::time::sleep(d).await,
+            None => std::future::pending().await,
+        }
+    };
+    tokio::pin!(deadline);
+    let report = |latencies: &[f64]| {
+        let p = poses.lock().counters;
+        let (drift_z, len) = {
+            let m = map.lock();
+            (m.drift.z, m.len())
+        };
+        counters.report(crate::bench::spread(latencies), p, drift_z, len)
+    };
+    // The worker's events channel closes when the thread ends, by a stop or a panic.
+    let worker_ended = loop {
+        tokio::select! {
+            event = events.recv() => match event {
+                Some(e) => {
+                    if let Err(err) = publishers.frame(&e).await {
+                        tracing::warn!("publishing frame {}: {err}", e.stamp_ns);
+                    }
+                    latencies.push(now_ns().saturating_sub(e.stamp_ns) as f64 * 1e-6);
+                }
+                None => break true,
+            },
+            _ = status_tick.tick() => {
+                let r = report(&latencies);
+                all_latencies.append(&mut latencies);
+                tracing::info!("{r}");
+                if let Err(e) = publishers.status(&r).await {
+                    tracing::warn!("publishing the status: {e}");
+                }
+            }
+            _ = snapshot_tick.tick() => {
+                if let Err(e) = save_snapshot(&map, config).await {
+                    let n = counters.snapshots_failed.fetch_add(1, Ordering::Relaxed) + 1;
+                    tracing::error!("{e:#} ({n} failed so far; trying again in {} s)", config.map.snapshot_period_s);
+                }
+            }
+            _ = &mut deadline => break false,
+            _ = tokio::signal::ctrl_c() => break false,
+            _ = sigterm.recv() => break false,
+        }
+    };
+    stop.store(true, Ordering::Relaxed);
+    camera.abort();
+    if let Some(d435i) = d435i {
+        d435i.abort();
+    }
+    drop(events);
+    let end =
+        tokio::task::spawn_blocking(move || worker.join()).await?.map_err(|_| anyhow!("the extractor thread died"))?;
+    all_latencies.append(&mut latencies);
+    if let WorkerEnd::Panicked { during, message, map_intact } = end {
+        if map_intact {
+            save_snapshot(&map, config).await.context("saving the map after the extractor thread's panic")?;
+            bail!("the extractor thread panicked {during}: {message} (the map is saved)");
+        }
+        bail!(
+            "the extractor thread panicked {during}: {message}; the map may be half-changed, so the last snapshot saved is kept"
+        );
+    }
+    if worker_ended {
+        tracing::warn!("the extractor thread stopped by itself");
+    }
+    save_snapshot(&map, config).await.context("saving the map at shutdown")?;
+    let r = report(&[]);
+    Ok(RunSummary {
+        frames_in: r.frames_in,
+        processed: r.processed,
+        dropped: r.dropped,
+        without_pose: r.without_pose,
+        map_polygons: r.map_polygons,
+        latency: crate::bench::spread(&all_latencies),
+    })
+}
+
+/// The map snapshotted under its lock, written (slow on a full or failing disk) off it.
+async fn save_snapshot(map: &Arc<Mutex<PolygonMap>>, config: &Config) -> Result<()> {
+    if config.map.snapshot_path.as_os_str().is_empty() {
+        return Ok(());
+    }
+    let snapshot = map.lock().snapshot();
+    let path = config.map.snapshot_path.clone();
+    tokio::task::spawn_blocking(move || crate::replay::write_snapshot(&snapshot, &path)).await?
+}

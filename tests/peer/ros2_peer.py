@@ -1,0 +1,178 @@
+#!/usr/bin/env python3
+"""The ROS 2 peer of tests/ros2_peer.rs: a node on rmw_zenoh written from rmw_zenoh's
+design document (examples/python/rmw_zenoh.py), sharing no code with polymap. Against a
+running polymap (mock camera, mock D435i, no VINS) it:
+
+- publishes VINS's odometry on /odometry: each pose of the sequence the mock camera replays,
+  stamped when the loop shows that frame (the mock camera's clock, rebuilt from poses.txt);
+- subscribes to polymap's topics and the D435i's, as rmw_zenoh declares subscriptions, and
+  checks every sample's attachment;
+- reads the ROS graph from the liveliness tokens;
+- calls get_map and get_foothold.
+
+Prints one JSON object with what it saw.
+"""
+
+import argparse
+import json
+import pathlib
+import sys
+import threading
+import time
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "examples" / "python"))
+
+from rmw_zenoh import Peer  # noqa: E402
+
+NS = "/polymap/leju"
+TOPICS = {
+    f"{NS}/frame_polygons": "polymap_msgs/msg/FramePolygons",
+    f"{NS}/map_updates": "polymap_msgs/msg/MapUpdate",
+    f"{NS}/markers": "visualization_msgs/msg/MarkerArray",
+    f"{NS}/status": "polymap_msgs/msg/Status",
+    "/camera/camera/infra1/image_rect_raw": "sensor_msgs/msg/Image",
+    "/camera/camera/infra1/camera_info": "sensor_msgs/msg/CameraInfo",
+    "/camera/camera/imu": "sensor_msgs/msg/Imu",
+}
+
+
+def read_poses(seq):
+    """(stamp ns, position, quaternion xyzw) per frame, stamps read exactly from the text."""
+    out = []
+    for line in (seq / "poses.txt").read_text().splitlines():
+        if not line.strip() or line.startswith("#"):
+            continue
+        f = line.split()
+        sec, _, frac = f[0].partition(".")
+        stamp = int(sec) * 1_000_000_000 + int((frac + "000000000")[:9])
+        out.append((stamp, [float(v) for v in f[1:4]], [float(v) for v in f[4:8]]))
+    return out
+
+
+class Stream:
+    """What arrived on one topic, and whether its attachments were rmw_zenoh's."""
+
+    def __init__(self):
+        self.count, self.bad_attachments, self.gaps, self.last = 0, 0, 0, None
+        self.first = None
+        self.last_seq = {}
+
+    def take(self, msg, att):
+        self.count += 1
+        self.last = msg
+        if self.first is None:
+            self.first = msg
+        if att is None or abs(att[1] - time.time_ns()) > 5_000_000_000:
+            self.bad_attachments += 1
+            return
+        seq, _, gid = att
+        if gid in self.last_seq and seq != self.last_seq[gid] + 1:
+            self.gaps += 1
+        self.last_seq[gid] = seq
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--connect", required=True)
+    ap.add_argument("--sequence", required=True, type=pathlib.Path)
+    ap.add_argument("--seconds", type=float, default=12.0)
+    args = ap.parse_args()
+
+    with Peer(args.connect, node="ros2_peer") as peer:
+        run(peer, args)
+
+
+def run(peer, args):
+    streams = {name: Stream() for name in TOPICS}
+    lock = threading.Lock()
+
+    def taker(name):
+        def take(msg, att):
+            with lock:
+                streams[name].take(msg, att)
+        return take
+
+    for name, typename in TOPICS.items():
+        peer.subscribe(name, typename, taker(name))
+
+    # VINS: the sequence's poses on the mock camera's looped clock (mock/clock.rs's rule:
+    # at wall time t the loop shows sequence time first + t mod period, period one frame
+    # interval past the last frame).
+    poses = read_poses(args.sequence)
+    first, last = poses[0][0], poses[-1][0]
+    period = last - first + (last - first) // (len(poses) - 1)
+    put = peer.publisher("/odometry", "nav_msgs/msg/Odometry", qos="::,100:,:,:,,")
+    Odometry = peer.msg("nav_msgs/msg/Odometry")
+    m = peer.store.types
+    Header, Time = m["std_msgs/msg/Header"], m["builtin_interfaces/msg/Time"]
+    import numpy as np
+
+    def odometry(stamp, p, q):
+        return Odometry(
+            header=Header(stamp=Time(sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000), frame_id="world"),
+            child_frame_id="body",
+            pose=m["geometry_msgs/msg/PoseWithCovariance"](
+                pose=m["geometry_msgs/msg/Pose"](
+                    position=m["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2]),
+                    orientation=m["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])),
+                covariance=np.zeros(36)),
+            twist=m["geometry_msgs/msg/TwistWithCovariance"](
+                twist=m["geometry_msgs/msg/Twist"](linear=m["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
+                                                   angular=m["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)),
+                covariance=np.zeros(36)))
+
+    published = 0
+    sent = set()
+    start = time.time()
+    status_at_2s = None
+    while time.time() - start < args.seconds:
+        now = time.time_ns()
+        loop_start = now - now % period
+        # Every frame the loop has shown in the last 100 ms, stamped as the camera stamps it.
+        for base in (loop_start - period, loop_start):
+            for stamp, p, q in poses:
+                shown = base + (stamp - first)
+                if now - 100_000_000 <= shown <= now and shown not in sent:
+                    put(odometry(shown, p, q))
+                    sent.add(shown)
+                    published += 1
+        if status_at_2s is None and time.time() - start > 3.0:
+            with lock:
+                status_at_2s = streams[f"{NS}/status"].last
+        time.sleep(0.003)
+
+    graph = peer.graph()
+    get_map = peer.client(f"{NS}/get_map", "polymap_msgs/srv/GetMap")
+    response, reply_att, seq, gid = get_map(peer.msg("polymap_msgs/srv/GetMap_Request")(structure_needs_at_least_one_member=0))
+    get_foothold = peer.client(f"{NS}/get_foothold", "polymap_msgs/srv/GetFoothold")
+    point = m["geometry_msgs/msg/Point"](x=0.42, y=0.0, z=0.30)
+    f_response, f_att, f_seq, f_gid = get_foothold(peer.msg("polymap_msgs/srv/GetFoothold_Request")(point=point))
+    with lock:
+        status = streams[f"{NS}/status"].last
+        out = {
+            "odometry_published": published,
+            "streams": {n: {"count": s.count, "bad_attachments": s.bad_attachments, "gaps": s.gaps} for n, s in streams.items()},
+            "keys": {n: peer.key(n, t) for n, t in TOPICS.items()},
+            "hashes": {t: peer.type_hash(t) for t in sorted(set(TOPICS.values()) | {"nav_msgs/msg/Odometry", "polymap_msgs/srv/GetMap", "polymap_msgs/srv/GetFoothold"})},
+            "graph": graph,
+            "status_early": None if status_at_2s is None else {"processed": int(status_at_2s.frames_processed), "without_pose": int(status_at_2s.frames_without_pose)},
+            "status_last": None if status is None else {"processed": int(status.frames_processed), "without_pose": int(status.frames_without_pose), "poses_accepted": int(status.poses_accepted), "poses_refused": int(status.poses_refused)},
+            "imu_first": None if streams["/camera/camera/imu"].first is None else {
+                "angular_velocity_covariance": [float(v) for v in streams["/camera/camera/imu"].first.angular_velocity_covariance],
+                "frame_id": streams["/camera/camera/imu"].first.header.frame_id},
+            "image_first": None if streams["/camera/camera/infra1/image_rect_raw"].first is None else {
+                "width": int(streams["/camera/camera/infra1/image_rect_raw"].first.width),
+                "encoding": streams["/camera/camera/infra1/image_rect_raw"].first.encoding},
+            "map": {"polygons": len(response.map.polygons), "frame_id": response.map.header.frame_id,
+                    "treads": sum(1 for p in response.map.polygons if int(p.label) == 2)},
+            "map_reply": {"attachment": reply_att is not None, "echoes_seq": reply_att is not None and reply_att[0] == seq,
+                          "echoes_gid": reply_att is not None and reply_att[2] == gid},
+            "foothold": {"found": bool(f_response.foothold.found), "contains": bool(f_response.foothold.contains),
+                         "label": int(f_response.foothold.label),
+                         "echoes": f_att is not None and f_att[0] == f_seq and f_att[2] == f_gid},
+        }
+    print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,192 @@
+//! polymap as ROS 2 nodes see it. A ROS 2 peer that shares none of polymap's code
+//! (tests/peer/ros2_peer.py on examples/python/rmw_zenoh.py: eclipse-zenoh and rosbags,
+//! written from rmw_zenoh's design document) meets a running `polymap run` (mock camera, mock
+//! D435i) on rmw_zenoh's keys: it receives every topic with valid attachments, finds polymap
+//! in the ROS graph with types and hashes, calls both services, and is polymap's VINS: its
+//! odometry on /odometry is what polymap maps with. In bridge mode, polymap announces itself
+//! as zenoh-bridge-ros2dds's announcements look and publishes on the ROS names.
+//!
+//! scripts/test.sh makes the virtualenv (eclipse-zenoh, rosbags) and sets POLYMAP_PYTHON.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use polymap::ros2::session::{free_loopback_port, loopback, loopback_json5};
+
+fn python() -> String {
+    std::env::var("POLYMAP_PYTHON").expect("POLYMAP_PYTHON: a python with eclipse-zenoh and rosbags (scripts/test.sh)")
+}
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// `polymap run` with the mock camera at 8 Hz and the mock D435i, listening on `port`;
+/// `extra` is more TOML.
+fn mapper(dir: &Path, port: u16, extra: &str, seconds: u32) -> std::process::Child {
+    let zenoh = dir.join("mapper.json5");
+    std::fs::write(&zenoh, loopback_json5(Some(port), &[])).unwrap();
+    let config = dir.join("mapper.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[sources.depth]\nsequence = {:?}\nfps = 8\n[sources.d435i]\nkind = \"mock\"\nir_width = 320\nir_height = 240\n\
+             [pipeline]\nbackend = \"cpu\"\n[zenoh]\nconfig_file = {:?}\n{extra}",
+            root().join("mock_frames/straight_320").display().to_string(),
+            zenoh.display().to_string(),
+        ),
+    )
+    .unwrap();
+    Command::new(env!("CARGO_BIN_EXE_polymap"))
+        .args(["run", "--duration", &seconds.to_string(), "--config"])
+        .arg(&config)
+        .stderr(std::fs::File::create(dir.join("mapper.log")).unwrap())
+        .spawn()
+        .unwrap()
+}
+
+#[test]
+fn a_ros_2_peer_on_rmw_zenoh_sees_polymap_s_topics_graph_and_services_and_feeds_its_odometry() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_loopback_port().unwrap();
+    let mut mapper = mapper(dir.path(), port, "", 40);
+    std::thread::sleep(Duration::from_secs(2));
+    let out = Command::new(python())
+        .arg(root().join("tests/peer/ros2_peer.py"))
+        .args(["--connect", &format!("tcp/127.0.0.1:{port}"), "--seconds", "15", "--sequence"])
+        .arg(root().join("mock_frames/straight_320"))
+        .output()
+        .unwrap();
+    let _ = mapper.kill();
+    let _ = mapper.wait();
+    let log = std::fs::read_to_string(dir.path().join("mapper.log")).unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "peer failed: {stdout}\n{}\n{log}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+
+    // Every topic arrives on the peer's own rmw_zenoh keys, each sample with an attachment
+    // whose sequence numbers count up by one per publisher. polymap's own topics lose
+    // nothing; the camera's streams may drop a sample when the machine is loaded (they are
+    // sent drop-on-congestion, as realsense-ros's are with rmw_zenoh: a stale IMU sample is
+    // worth less than a late one).
+    for (topic, s) in v["streams"].as_object().unwrap() {
+        let least = if topic.ends_with("imu") {
+            500
+        } else if topic.ends_with("status") {
+            10
+        } else {
+            20
+        };
+        let count = s["count"].as_u64().unwrap();
+        assert!(count >= least, "{topic}: {s}");
+        assert_eq!(s["bad_attachments"], 0, "{topic}: {s}");
+        let gaps = s["gaps"].as_u64().unwrap();
+        if topic.starts_with("/polymap") {
+            assert_eq!(gaps, 0, "{topic}: {s}");
+        } else {
+            assert!(gaps * 10 <= count, "{topic}: {s}");
+        }
+    }
+    assert_eq!(v["image_first"]["width"], 320);
+    assert_eq!(v["image_first"]["encoding"], "mono8");
+    assert_eq!(v["imu_first"]["angular_velocity_covariance"][0], 0.01);
+
+    // The peer's hashes (rosbags from polymap_msgs/ and ROS 2 Jazzy's definitions) are the
+    // ones polymap computes from its own types.
+    use polymap::ros2::msg;
+    use polymap::ros2::types::{message_hash, service_hash};
+    let hashes = &v["hashes"];
+    for (ty, ours) in [
+        ("polymap_msgs/msg/FramePolygons", message_hash::<msg::FramePolygons>()),
+        ("polymap_msgs/msg/MapUpdate", message_hash::<msg::MapUpdate>()),
+        ("polymap_msgs/msg/Status", message_hash::<msg::Status>()),
+        ("visualization_msgs/msg/MarkerArray", message_hash::<msg::MarkerArray>()),
+        ("sensor_msgs/msg/Image", message_hash::<msg::Image>()),
+        ("sensor_msgs/msg/Imu", message_hash::<msg::Imu>()),
+        ("nav_msgs/msg/Odometry", message_hash::<msg::Odometry>()),
+        ("polymap_msgs/srv/GetMap", service_hash::<msg::GetMap>()),
+        ("polymap_msgs/srv/GetFoothold", service_hash::<msg::GetFoothold>()),
+    ] {
+        assert_eq!(hashes[ty], ours, "{ty}");
+    }
+
+    // The ROS graph: polymap's node, its publishers, its subscription and its services, with
+    // types and hashes.
+    let graph = v["graph"].as_array().unwrap();
+    let polymap: Vec<_> =
+        graph.iter().filter(|e| e["node"] == "polymap" && e["namespace"] == "/polymap/leju").collect();
+    assert!(polymap.iter().any(|e| e["kind"] == "NN"), "{graph:?}");
+    let has = |kind: &str, name: &str, ty: &str| {
+        polymap.iter().any(|e| {
+            e["kind"] == kind
+                && e["name"] == name
+                && e["type"] == polymap::ros2::types::dds_type_name(ty)
+                && e["hash"] == hashes[ty]
+        })
+    };
+    for (name, ty) in [
+        ("/polymap/leju/frame_polygons", "polymap_msgs/msg/FramePolygons"),
+        ("/polymap/leju/map_updates", "polymap_msgs/msg/MapUpdate"),
+        ("/polymap/leju/markers", "visualization_msgs/msg/MarkerArray"),
+        ("/polymap/leju/status", "polymap_msgs/msg/Status"),
+        ("/camera/camera/infra1/image_rect_raw", "sensor_msgs/msg/Image"),
+        ("/camera/camera/imu", "sensor_msgs/msg/Imu"),
+    ] {
+        assert!(has("MP", name, ty), "publisher {name}: {polymap:?}");
+    }
+    assert!(has("MS", "/odometry", "nav_msgs/msg/Odometry"), "{polymap:?}");
+    assert!(has("SS", "/polymap/leju/get_map", "polymap_msgs/srv/GetMap"), "{polymap:?}");
+    assert!(has("SS", "/polymap/leju/get_foothold", "polymap_msgs/srv/GetFoothold"), "{polymap:?}");
+    // The map_updates publisher keeps every sample (reliable, keep all).
+    assert!(polymap.iter().any(|e| e["name"] == "/polymap/leju/map_updates" && e["qos"] == "::2,:,:,:,,"));
+
+    // Services: answers, with attachments naming the request.
+    assert!(v["map"]["treads"].as_u64().unwrap() >= 3, "{}", v["map"]);
+    assert_eq!(v["map_reply"], serde_json::json!({"attachment": true, "echoes_seq": true, "echoes_gid": true}));
+    assert_eq!(v["foothold"], serde_json::json!({"found": true, "contains": true, "label": 2, "echoes": true}));
+
+    // The peer was polymap's VINS: once its odometry flowed, every frame had a pose.
+    let (early, last) = (&v["status_early"], &v["status_last"]);
+    assert!(v["odometry_published"].as_u64().unwrap() >= 300, "{v}");
+    assert!(
+        last["processed"].as_u64().unwrap() >= early["processed"].as_u64().unwrap() + 10,
+        "frames mapped with the peer's poses: {early} -> {last}"
+    );
+    assert_eq!(last["without_pose"], early["without_pose"], "no frame without a pose once odometry flowed");
+    assert_eq!(last["poses_refused"], 0, "{last}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn in_bridge_mode_polymap_announces_itself_as_zenoh_bridge_ros2dds_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_loopback_port().unwrap();
+    let mut mapper = mapper(dir.path(), port, "[ros2]\nmode = \"bridge\"\n", 12);
+    let session = polymap::ros2::session::open(loopback(None, &[port])).await.unwrap();
+    // Data on the ROS names without their leading '/', as the bridge routes them (the status:
+    // it goes out every second, odometry or not).
+    let status = session.declare_subscriber("polymap/leju/status").await.unwrap();
+    let sample = tokio::time::timeout(Duration::from_secs(8), status.recv_async())
+        .await
+        .expect("the status on the bridge's key")
+        .unwrap();
+    let status: polymap::ros2::msg::Status = polymap::ros2::cdr::from_slice(&sample.payload().to_bytes()).unwrap();
+    assert!(status.frames_in > 0, "{status:?}");
+    assert!(sample.attachment().is_none(), "the bridge sends no attachments");
+    // The announcements zenoh-bridge-ros2dds makes of a route: `@/<zid>/@ros2_lv/MP/<key>/<type>/<qos>`.
+    let replies = session.liveliness().get("@/*/@ros2_lv/**").await.unwrap();
+    let mut tokens = Vec::new();
+    while let Ok(reply) = replies.recv_async().await {
+        tokens.push(reply.result().unwrap().key_expr().to_string());
+    }
+    let _ = mapper.kill();
+    let _ = mapper.wait();
+    let expect = |prefix: &str| {
+        assert!(tokens.iter().any(|t| t.split('/').nth(3).is_some() && t.contains(prefix)), "{prefix} in {tokens:?}")
+    };
+    expect("/@ros2_lv/MP/polymap§leju§map_updates/polymap_msgs§msg§MapUpdate/:1:0:1,0:typehash=RIHS01_");
+    expect("/@ros2_lv/MP/polymap§leju§frame_polygons/polymap_msgs§msg§FramePolygons/:1:0:0,10");
+    expect("/@ros2_lv/MS/odometry/nav_msgs§msg§Odometry/:1:0:0,100");
+    expect("/@ros2_lv/SS/polymap§leju§get_map/polymap_msgs§srv§GetMap");
+    expect("/@ros2_lv/MP/camera§camera§imu/sensor_msgs§msg§Imu/");
+}
