@@ -23,17 +23,7 @@ async fn main() -> anyhow::Result<()> {
     if let Some(ns) = args.next() {
         config.ros2.namespace = RosName::parse(&ns).map_err(|e| anyhow::anyhow!(e))?;
     }
-    let zenoh = zenoh::Config::from_json5(
-        &serde_json::json!({
-            "mode": "peer",
-            "connect": { "endpoints": [endpoint] },
-            "listen": { "endpoints": ["tcp/127.0.0.1:0"] },
-            "scouting": { "multicast": { "enabled": false } },
-        })
-        .to_string(),
-    )
-    .map_err(|e| anyhow::anyhow!("{e}"))?;
-    let session = polymap::ros2::session::open(zenoh).await?;
+    let session = polymap::ros2::session::open(polymap::ros2::session::connecting_to(&endpoint)?).await?;
     let node = Node::new(
         &session,
         NodeOptions { namespace: RosName::root(), name: "planner_client".into(), ..config.ros2.node_options() },

@@ -77,19 +77,29 @@ pub fn rmw_zenoh_defaults() -> zenoh::Config {
     }))
 }
 
-/// A peer on loopback only, multicast off, listening on port `listen` (any, if None) and
-/// connecting to the peers on `connect`: as the text of a JSON5 config file, for a process
-/// started with one (the tests, `polymap demo`).
-pub fn loopback_json5(listen: Option<u16>, connect: &[u16]) -> String {
-    let endpoint = |p: u16| format!("tcp/127.0.0.1:{p}");
+/// A peer listening on loopback only (port `listen`, any if None), multicast off, connecting
+/// to `connect` (endpoints such as `tcp/127.0.0.1:7447`): as the text of a JSON5 config file.
+pub fn peer_json5(listen: Option<u16>, connect: &[String]) -> String {
     serde_json::json!({
         "mode": "peer",
-        "listen": { "endpoints": [endpoint(listen.unwrap_or(0))] },
-        "connect": { "endpoints": connect.iter().map(|&p| endpoint(p)).collect::<Vec<_>>() },
+        "listen": { "endpoints": [format!("tcp/127.0.0.1:{}", listen.unwrap_or(0))] },
+        "connect": { "endpoints": connect },
         "scouting": { "multicast": { "enabled": false } },
         "timestamping": { "enabled": true },
     })
     .to_string()
+}
+
+/// A peer on loopback only, listening on port `listen` and connecting to the peers on the
+/// loopback ports `connect`: for a process started with a config file (the tests, `polymap
+/// demo`).
+pub fn loopback_json5(listen: Option<u16>, connect: &[u16]) -> String {
+    peer_json5(listen, &connect.iter().map(|p| format!("tcp/127.0.0.1:{p}")).collect::<Vec<_>>())
+}
+
+/// A peer on loopback only that connects to `endpoint` (a client program's session).
+pub fn connecting_to(endpoint: &str) -> Result<zenoh::Config, Ros2Error> {
+    zenoh::Config::from_json5(&peer_json5(None, &[endpoint.to_string()])).map_err(|e| Ros2Error::zenoh(endpoint, e))
 }
 
 /// The same as a config.

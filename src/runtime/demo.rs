@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use anyhow::Result;
 
-use super::RunSummary;
+use super::status::Report;
 use crate::config::Config;
 use crate::ros2::session::{free_loopback_port, loopback_json5};
 use crate::sequence::Sequence;
@@ -16,7 +16,7 @@ use crate::sequence::Sequence;
 pub const ROUTER_PORT: u16 = 7447;
 
 /// Runs for `duration`; the map is saved where `config.map.snapshot_path` says.
-pub async fn demo(config: &Config, duration: Duration, vins_rate_hz: f64) -> Result<RunSummary> {
+pub async fn demo(config: &Config, duration: Duration, vins_rate_hz: f64) -> Result<Report> {
     let port = if std::net::TcpListener::bind(("127.0.0.1", ROUTER_PORT)).is_ok() {
         ROUTER_PORT
     } else {

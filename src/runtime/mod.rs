@@ -41,36 +41,9 @@ use crate::ros2::Node;
 use status::Counters;
 use worker::{FrameEvent, WorkerEnd};
 
-/// What `run` did, for the caller's last words.
-#[derive(Clone, Debug)]
-pub struct RunSummary {
-    pub frames_in: u64,
-    pub processed: u64,
-    pub dropped: u64,
-    pub without_pose: u64,
-    pub map_polygons: usize,
-    /// Frame stamp to published, over the whole run, ms.
-    pub latency: crate::bench::Spread,
-}
-
-impl std::fmt::Display for RunSummary {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "{} frames in, {} processed, {} dropped, {} without pose; frame-to-published latency median {:.1} ms, p99 {:.1} ms; map of {} polygons",
-            self.frames_in,
-            self.processed,
-            self.dropped,
-            self.without_pose,
-            self.latency.median,
-            self.latency.p99,
-            self.map_polygons
-        )
-    }
-}
-
-/// Runs until SIGINT / SIGTERM or `duration`; saves the map at the end.
-pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSummary> {
+/// Runs until SIGINT / SIGTERM or `duration`; saves the map at the end. Returns the
+/// counts of the whole run, its latency over every frame published.
+pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::Report> {
     let seq = sources::mock_sequence(config)?;
     crate::replay::remove_stale_snapshot_temps(config);
     let session = crate::ros2::session::open(crate::ros2::session::config(&config.zenoh.config_file)?).await?;
@@ -177,15 +150,7 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<RunSumma
         tracing::warn!("the extractor thread stopped by itself");
     }
     save_snapshot(&map, config).await.context("saving the map at shutdown")?;
-    let r = report(&[]);
-    Ok(RunSummary {
-        frames_in: r.frames_in,
-        processed: r.processed,
-        dropped: r.dropped,
-        without_pose: r.without_pose,
-        map_polygons: r.map_polygons,
-        latency: crate::bench::spread(&all_latencies),
-    })
+    Ok(report(&all_latencies))
 }
 
 /// The map snapshotted under its lock, written (slow on a full or failing disk) off it.
