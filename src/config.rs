@@ -360,11 +360,18 @@ impl Default for MapConfig {
 pub struct PosesConfig {
     /// A frame between two poses further apart than this gets no pose and is skipped, s.
     pub max_gap_s: f64,
+    /// Poses further than this from the odometry's origin are refused, m.
+    pub max_radius_m: f64,
+    /// Poses stamped further than this ahead of this machine's clock are refused, s.
+    pub max_ahead_s: f64,
+    /// A pose stamped before the newest after this long without poses is the odometry
+    /// starting over (VINS restarted): the buffer starts again from it, s.
+    pub restart_after_s: f64,
 }
 
 impl Default for PosesConfig {
     fn default() -> Self {
-        PosesConfig { max_gap_s: 0.1 }
+        PosesConfig { max_gap_s: 0.1, max_radius_m: 1e4, max_ahead_s: 0.5, restart_after_s: 1.0 }
     }
 }
 
@@ -457,7 +464,8 @@ impl Config {
     /// Reads, parses and validates a config file.
     pub fn load(path: impl AsRef<Path>) -> Result<Config, ConfigError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
+        // A config is a few kilobytes; anything much larger (or not a file) is a mistake.
+        let text = crate::files::read_text_capped(path, 1 << 20).map_err(|e| ConfigError {
             file: path.to_owned(),
             key: "(file)".into(),
             reason: e.to_string(),
@@ -503,8 +511,8 @@ impl Config {
         check_range("sources.d435i.angular_velocity_cov", i.angular_velocity_cov, 0.0, 1e3)?;
         check_range("sources.d435i.linear_accel_cov", i.linear_accel_cov, 0.0, 1e3)?;
         let e = &self.sources.extrinsics;
-        if e.xyz.iter().any(|v| !v.is_finite()) {
-            return Err(("sources.extrinsics.xyz".into(), format!("{:?} must be finite metres", e.xyz)));
+        if e.xyz.iter().any(|v| !(v.is_finite() && v.abs() <= 100.0)) {
+            return Err(("sources.extrinsics.xyz".into(), format!("{:?} must be finite metres within 100 m", e.xyz)));
         }
         let qn = e.quat_xyzw.iter().map(|v| v * v).sum::<f64>().sqrt();
         if !((qn - 1.0).abs() <= crate::sequence::QUATERNION_NORM_TOLERANCE) {
@@ -516,7 +524,7 @@ impl Config {
 
         let p = &self.pipeline;
         check_range("pipeline.diffusion_iterations", p.diffusion_iterations as f64, 0.0, 1000.0)?;
-        check_positive("pipeline.diffusion_kappa_m", p.diffusion_kappa_m)?;
+        check_range("pipeline.diffusion_kappa_m", p.diffusion_kappa_m, 1e-4, 10.0)?;
         if !(p.diffusion_gamma > 0.0 && p.diffusion_gamma <= 0.25) {
             return Err((
                 "pipeline.diffusion_gamma".into(),
@@ -526,41 +534,41 @@ impl Config {
         if ![3, 5, 7].contains(&p.normal_kernel) {
             return Err(("pipeline.normal_kernel".into(), format!("{} must be 3, 5 or 7", p.normal_kernel)));
         }
-        check_positive("pipeline.canny_low", p.canny_low)?;
-        check_positive("pipeline.canny_high", p.canny_high)?;
+        check_range("pipeline.canny_low", p.canny_low, 1e-4, 4.0)?;
+        check_range("pipeline.canny_high", p.canny_high, 1e-4, 4.0)?;
         if p.canny_low > p.canny_high {
             return Err((
                 "pipeline.canny_low".into(),
                 format!("{} must not exceed canny_high = {}", p.canny_low, p.canny_high),
             ));
         }
-        check_positive("pipeline.depth_edge_ratio", p.depth_edge_ratio)?;
+        check_range("pipeline.depth_edge_ratio", p.depth_edge_ratio, 1e-4, 10.0)?;
         if p.closing_kernel_px % 2 == 0 || p.closing_kernel_px > 63 {
             return Err((
                 "pipeline.closing_kernel_px".into(),
                 format!("{} must be odd and at most 63", p.closing_kernel_px),
             ));
         }
-        check_positive("pipeline.min_polygon_area_m2", p.min_polygon_area_m2)?;
-        check_positive("pipeline.simplify_tolerance_px", p.simplify_tolerance_px)?;
+        check_range("pipeline.min_polygon_area_m2", p.min_polygon_area_m2, 1e-6, 100.0)?;
+        check_range("pipeline.simplify_tolerance_px", p.simplify_tolerance_px, 0.01, 100.0)?;
         check_range("pipeline.ransac_hypotheses", p.ransac_hypotheses as f64, 1.0, 1024.0)?;
-        check_positive("pipeline.ransac_inlier_distance_m", p.ransac_inlier_distance_m)?;
+        check_range("pipeline.ransac_inlier_distance_m", p.ransac_inlier_distance_m, 1e-5, 1.0)?;
         check_range("pipeline.ransac_min_inlier_ratio", p.ransac_min_inlier_ratio, 0.0, 1.0)?;
         check_range("pipeline.region_grow_px", p.region_grow_px as f64, 0.0, 32.0)?;
 
         let m = &self.map;
-        check_positive("map.merge_height_tolerance_m", m.merge_height_tolerance_m)?;
+        check_range("map.merge_height_tolerance_m", m.merge_height_tolerance_m, 1e-4, 1.0)?;
         check_range("map.merge_normal_tolerance_deg", m.merge_normal_tolerance_deg, 0.0, 90.0)?;
         check_range("map.merge_min_overlap", m.merge_min_overlap, 0.0, 1.0)?;
-        check_positive("map.drift_sigma_p", m.drift_sigma_p)?;
-        check_positive("map.drift_sigma_m", m.drift_sigma_m)?;
+        check_range("map.drift_sigma_p", m.drift_sigma_p, 1e-12, 1.0)?;
+        check_range("map.drift_sigma_m", m.drift_sigma_m, 1e-12, 1.0)?;
         check_range("map.horizontal_max_tilt_deg", m.horizontal_max_tilt_deg, 0.0, 90.0)?;
         check_range("map.vertical_min_tilt_deg", m.vertical_min_tilt_deg, 0.0, 90.0)?;
         check_range("map.max_vertices", m.max_vertices as f64, 8.0, 4096.0)?;
         check_range("map.foot_margin_m", m.foot_margin_m, 0.0, 1.0)?;
         check_range("map.clear_after_frames", m.clear_after_frames as f64, 1.0, 1000.0)?;
-        check_positive("map.clear_tolerance_m", m.clear_tolerance_m)?;
-        check_positive("map.snapshot_period_s", m.snapshot_period_s)?;
+        check_range("map.clear_tolerance_m", m.clear_tolerance_m, 1e-3, 1.0)?;
+        check_range("map.snapshot_period_s", m.snapshot_period_s, 0.1, 86_400.0)?;
         if m.horizontal_max_tilt_deg >= m.vertical_min_tilt_deg {
             return Err((
                 "map.horizontal_max_tilt_deg".into(),
@@ -571,7 +579,11 @@ impl Config {
             ));
         }
 
-        check_range("poses.max_gap_s", self.poses.max_gap_s, 0.001, 10.0)?;
+        let q = &self.poses;
+        check_range("poses.max_gap_s", q.max_gap_s, 0.001, 10.0)?;
+        check_range("poses.max_radius_m", q.max_radius_m, 1.0, crate::types::MAX_COORDINATE_M)?;
+        check_range("poses.max_ahead_s", q.max_ahead_s, 0.0, 60.0)?;
+        check_range("poses.restart_after_s", q.restart_after_s, 0.1, 3600.0)?;
         let r = &self.ros2;
         check_range("ros2.domain_id", r.domain_id as f64, 0.0, 232.0)?;
         let node_name_ok = r.node.chars().next().is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
@@ -583,15 +595,52 @@ impl Config {
     }
 }
 
+impl Config {
+    /// What `validate` cannot see: that the files the config names are there and usable
+    /// (`polymap config` checks it). The first problem, as (dotted key, reason).
+    pub fn check_files(&self) -> Result<(), Invalid> {
+        let z = &self.zenoh.config_file;
+        if !z.as_os_str().is_empty() {
+            crate::ros2::session::config(z).map_err(|e| ("zenoh.config_file".to_string(), e.to_string()))?;
+        }
+        let snapshot = &self.map.snapshot_path;
+        if !snapshot.as_os_str().is_empty() {
+            let why = |reason: String| ("map.snapshot_path".to_string(), format!("{}: {reason}", snapshot.display()));
+            if snapshot.is_dir() {
+                return Err(why("is a directory; the map is saved as a file".into()));
+            }
+            let dir = match snapshot.parent() {
+                Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+                _ => PathBuf::from("."),
+            };
+            // The directory is made on the first save if missing; if it is there it must
+            // take files (a probe file made and removed at once).
+            if dir.exists() {
+                let probe = dir.join(format!(".polymap-config-check.{}", std::process::id()));
+                std::fs::write(&probe, b"").map_err(|e| why(format!("cannot write in {}: {e}", dir.display())))?;
+                let _ = std::fs::remove_file(&probe);
+            }
+        }
+        let d = &self.sources.depth;
+        match d.kind {
+            DepthSourceKind::Mock | DepthSourceKind::Sequence => {
+                crate::sequence::Sequence::open(&d.sequence)
+                    .map_err(|e| ("sources.depth.sequence".to_string(), e.to_string()))?;
+            }
+            DepthSourceKind::Bag if !d.bag.is_file() => {
+                return Err(("sources.depth.bag".into(), format!("{}: no such file", d.bag.display())));
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+}
+
 /// A config value that cannot be used: its dotted key and why.
 pub type Invalid = (String, String);
 
 fn one_line(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
-}
-
-fn check_positive(key: &str, v: f64) -> Result<(), Invalid> {
-    if v.is_finite() && v > 0.0 { Ok(()) } else { Err((key.into(), format!("{v} must be a finite number above 0"))) }
 }
 
 fn check_range(key: &str, v: f64, lo: f64, hi: f64) -> Result<(), Invalid> {

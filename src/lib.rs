@@ -11,6 +11,7 @@ pub mod clock;
 pub mod config;
 pub mod eval;
 pub mod extract;
+pub mod files;
 pub mod interface;
 pub mod map;
 pub mod mock;

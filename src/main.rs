@@ -180,9 +180,12 @@ enum Command {
 
 fn main() {
     polymap::keep_freed_memory();
+    polymap::files::survive_file_size_limits();
     tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
         .with_writer(std::io::stderr)
+        // Colours for a terminal only, not for journald or a log file.
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
     if let Err(e) = run(Cli::parse()) {
         eprintln!("error: {e:#}");
@@ -333,6 +336,9 @@ fn run(cli: Cli) -> Result<()> {
                 drift_mm_per_s: drift,
                 duration: duration.map(seconds).transpose()?,
             };
+            if let Some(p) = opts.problem() {
+                bail!("{p}");
+            }
             let runtime = tokio::runtime::Runtime::new()?;
             let sent = runtime.block_on(async {
                 tokio::select! {
@@ -344,16 +350,21 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Config { file } => {
             let config = Config::load(&file)?;
+            config.check_files().map_err(|(key, reason)| polymap::config::ConfigError {
+                file: file.clone(),
+                key,
+                reason,
+            })?;
             print!("{}", toml::to_string(&config)?);
         }
     }
     Ok(())
 }
 
-/// A `--duration` in seconds, refused unless positive and finite.
+/// A `--duration` in seconds: from a millisecond to three years.
 fn seconds(s: f64) -> Result<std::time::Duration> {
-    if !(s.is_finite() && s > 0.0) {
-        bail!("--duration {s} must be a positive number of seconds");
+    if !(s.is_finite() && (1e-3..=1e8).contains(&s)) {
+        bail!("--duration {s} must be within 0.001..=100000000 seconds");
     }
     Ok(std::time::Duration::from_secs_f64(s))
 }
@@ -507,8 +518,8 @@ fn evaluate_map(s: &Sequence, path: &Path, json: bool, debug: Option<&Path>) -> 
 
 /// `polymap bench SEQ`: frames are read once, then extracted in a loop and timed.
 fn bench(s: &Sequence, config: &Config, frames: usize, json: bool) -> Result<()> {
-    if s.is_empty() || frames == 0 {
-        bail!("nothing to time: {} frames, --frames {frames}", s.len());
+    if s.is_empty() || !(1..=1_000_000).contains(&frames) {
+        bail!("nothing to time: {} frames, --frames {frames} (1..=1000000)", s.len());
     }
     let depth: Vec<_> = (0..s.len()).map(|k| s.depth(k)).collect::<Result<_, _>>()?;
     let mut extractor = extract::Extractor::new(&config.pipeline)?;

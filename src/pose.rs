@@ -5,7 +5,10 @@
 //! blended one.
 //!
 //! Poses come from outside (VINS over Zenoh), so each one is checked on the way in: a bad
-//! one is refused with what was wrong, counted, and leaves the buffer as it was.
+//! one is refused with what was wrong, counted, and leaves the buffer as it was. Checked:
+//! a finite position within reach of the origin, a unit quaternion, a stamp after the newest
+//! and not ahead of the local clock. An odometry that starts over (stamps going back after a
+//! silence: VINS restarted) is followed: the buffer starts again from its first pose.
 
 use std::collections::VecDeque;
 
@@ -38,6 +41,49 @@ pub enum PoseRejected {
     BadQuaternion { stamp_ns: StampNs, quat_xyzw: [f64; 4], norm: f64 },
     #[error("pose stamp {stamp_ns} ns is not after the previous one, {last_ns} ns")]
     StampNotIncreasing { stamp_ns: StampNs, last_ns: StampNs },
+    #[error("pose at {stamp_ns} ns is {distance_m:.3e} m from the origin, beyond the {max_m} m the map reaches")]
+    OutOfReach { stamp_ns: StampNs, distance_m: f64, max_m: f64 },
+    #[error("pose stamp {stamp_ns} ns is {ahead_ms:.1} ms ahead of this machine's clock (at most {max_ms:.1} ms)")]
+    FromTheFuture { stamp_ns: StampNs, ahead_ms: f64, max_ms: f64 },
+}
+
+/// What a pose from outside may be.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseLimits {
+    /// Frames between two poses further apart than this get no pose, ns.
+    pub max_gap_ns: u64,
+    /// Positions further than this from the origin are refused, m (never above
+    /// [`crate::types::MAX_COORDINATE_M`]).
+    pub max_radius_m: f64,
+    /// Stamps further than this ahead of the local clock are refused, ns; None: not checked
+    /// (poses from a recording).
+    pub max_ahead_ns: Option<u64>,
+    /// After this long without a pose, one stamped before the newest is the odometry
+    /// starting over, ns; None: never (it is refused as going back).
+    pub restart_after_ns: Option<u64>,
+}
+
+impl PoseLimits {
+    /// Only the gap, and the world polymap maps: for poses polymap made itself.
+    pub fn gap_only(max_gap_ns: u64) -> PoseLimits {
+        PoseLimits {
+            max_gap_ns,
+            max_radius_m: crate::types::MAX_COORDINATE_M,
+            max_ahead_ns: None,
+            restart_after_ns: None,
+        }
+    }
+
+    /// As the config says, for odometry from outside.
+    pub fn from_config(c: &crate::config::PosesConfig) -> PoseLimits {
+        let ns = |s: f64| (s * 1e9) as u64;
+        PoseLimits {
+            max_gap_ns: ns(c.max_gap_s),
+            max_radius_m: c.max_radius_m.min(crate::types::MAX_COORDINATE_M),
+            max_ahead_ns: Some(ns(c.max_ahead_s)),
+            restart_after_ns: Some(ns(c.restart_after_s)),
+        }
+    }
 }
 
 /// Why a frame has no pose.
@@ -70,23 +116,32 @@ pub struct PoseCounters {
     pub undecodable: u64,
     /// Lookups that found no pose (each skipped frame).
     pub missing: u64,
+    /// Times the odometry started over (stamps going back after a silence).
+    pub restarts: u64,
 }
 
 pub struct PoseBuffer {
     poses: VecDeque<Pose>,
     capacity: usize,
-    max_gap_ns: u64,
+    limits: PoseLimits,
+    /// Local clock when the newest pose arrived.
+    last_arrival_ns: Option<StampNs>,
     pub counters: PoseCounters,
 }
 
 impl PoseBuffer {
     /// Keeps the newest `capacity` poses; frames between poses further apart than
-    /// `max_gap_ns` get none.
+    /// `max_gap_ns` get none. Checks no stamp against the local clock ([`PoseLimits::gap_only`]).
     pub fn new(capacity: usize, max_gap_ns: u64) -> PoseBuffer {
+        PoseBuffer::with_limits(capacity, PoseLimits::gap_only(max_gap_ns))
+    }
+
+    pub fn with_limits(capacity: usize, limits: PoseLimits) -> PoseBuffer {
         PoseBuffer {
-            poses: VecDeque::with_capacity(capacity),
+            poses: VecDeque::with_capacity(capacity.clamp(2, 1 << 16)),
             capacity: capacity.max(2),
-            max_gap_ns,
+            limits,
+            last_arrival_ns: None,
             counters: PoseCounters::default(),
         }
     }
@@ -104,15 +159,37 @@ impl PoseBuffer {
         self.poses.iter()
     }
 
-    /// Checks and keeps one pose; the oldest is dropped when full.
+    /// Checks and keeps one pose arriving now; the oldest is dropped when full.
     pub fn push(&mut self, raw: &RawPose) -> Result<(), PoseRejected> {
-        let checked = check(raw, self.poses.back().map(|p| p.stamp_ns));
+        self.push_at(raw, crate::clock::now_ns())
+    }
+
+    /// Checks and keeps one pose arriving at local time `now_ns`.
+    pub fn push_at(&mut self, raw: &RawPose, now_ns: StampNs) -> Result<(), PoseRejected> {
+        let newest = self.poses.back().map(|p| p.stamp_ns);
+        // Stamps going back after a silence: the odometry started over (VINS restarted).
+        let restarted = match (newest, self.limits.restart_after_ns, self.last_arrival_ns) {
+            (Some(n), Some(after), Some(arrived)) => raw.stamp_ns <= n && now_ns.saturating_sub(arrived) >= after,
+            _ => false,
+        };
+        let checked = check(raw, if restarted { None } else { newest }, &self.limits, now_ns);
         match checked {
             Ok(pose) => {
+                if restarted {
+                    tracing::warn!(
+                        "the odometry started over: a pose at {} ns after {:.1} s of silence, before the newest ({} ns); poses start again from it",
+                        raw.stamp_ns,
+                        now_ns.saturating_sub(self.last_arrival_ns.unwrap_or(now_ns)) as f64 * 1e-9,
+                        newest.unwrap_or(0)
+                    );
+                    self.poses.clear();
+                    self.counters.restarts += 1;
+                }
                 if self.poses.len() == self.capacity {
                     self.poses.pop_front();
                 }
                 self.poses.push_back(pose);
+                self.last_arrival_ns = Some(now_ns);
                 self.counters.accepted += 1;
                 Ok(())
             }
@@ -151,8 +228,12 @@ impl PoseBuffer {
         }
         let a = &self.poses[i - 1];
         let gap = b.stamp_ns - a.stamp_ns;
-        if gap > self.max_gap_ns {
-            return Err(NoPose::Gap { stamp_ns, gap_ms: gap as f64 * 1e-6, max_ms: self.max_gap_ns as f64 * 1e-6 });
+        if gap > self.limits.max_gap_ns {
+            return Err(NoPose::Gap {
+                stamp_ns,
+                gap_ms: gap as f64 * 1e-6,
+                max_ms: self.limits.max_gap_ns as f64 * 1e-6,
+            });
         }
         let dt = gap as f64 * 1e-9;
         let speed = (b.transform.translation.vector - a.transform.translation.vector).norm() / dt;
@@ -167,11 +248,20 @@ impl PoseBuffer {
     }
 }
 
-/// A checked pose: finite position, unit quaternion, stamp after `last_ns`.
-fn check(raw: &RawPose, last_ns: Option<StampNs>) -> Result<Pose, PoseRejected> {
+/// A checked pose: finite position within reach, unit quaternion, stamp after `last_ns`
+/// and not ahead of the local clock.
+fn check(raw: &RawPose, last_ns: Option<StampNs>, limits: &PoseLimits, now_ns: StampNs) -> Result<Pose, PoseRejected> {
     let RawPose { stamp_ns, position, quat_xyzw: q } = *raw;
     if !position.iter().all(|v| v.is_finite()) {
         return Err(PoseRejected::BadPosition { stamp_ns, position });
+    }
+    let distance_m = Vector3::from(position).norm();
+    if !(distance_m <= limits.max_radius_m) {
+        return Err(PoseRejected::OutOfReach { stamp_ns, distance_m, max_m: limits.max_radius_m });
+    }
+    if let Some(max) = limits.max_ahead_ns.filter(|&max| stamp_ns > now_ns.saturating_add(max)) {
+        let ahead_ms = (stamp_ns - now_ns) as f64 * 1e-6;
+        return Err(PoseRejected::FromTheFuture { stamp_ns, ahead_ms, max_ms: max as f64 * 1e-6 });
     }
     let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
     if !((norm - 1.0).abs() <= crate::sequence::QUATERNION_NORM_TOLERANCE) {

@@ -196,8 +196,14 @@ impl Sequence {
     }
 }
 
+/// The most a sequence's text files hold: camera.toml a few lines; poses.txt about 100 bytes
+/// a frame, so a day at 30 Hz; truth.json a scene of a few thousand polygons.
+const MAX_CAMERA_BYTES: u64 = 64 << 10;
+const MAX_POSES_BYTES: u64 = 1 << 30;
+const MAX_TRUTH_BYTES: u64 = 256 << 20;
+
 fn read_camera(path: &Path) -> Result<Intrinsics, SequenceError> {
-    let text = fs::read_to_string(path).map_err(|e| io_err(path, e))?;
+    let text = crate::files::read_text_capped(path, MAX_CAMERA_BYTES).map_err(|e| io_err(path, e))?;
     let intr: Intrinsics =
         toml::from_str(&text).map_err(|e| err(path, SequenceErrorKind::BadCamera, e.to_string().trim_end()))?;
     match intr.problem() {
@@ -281,6 +287,16 @@ pub fn parse_tum_line(line: &str) -> Result<Pose, (SequenceErrorKind, String)> {
             (SequenceErrorKind::BadPoseLine, format!("field {} ({:?}) is not a finite number", i + 2, f))
         })?;
     }
+    let distance = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    if distance > crate::types::MAX_COORDINATE_M {
+        return Err((
+            SequenceErrorKind::BadPoseLine,
+            format!(
+                "position is {distance:.3e} m from the origin, beyond the {} m polymap maps",
+                crate::types::MAX_COORDINATE_M
+            ),
+        ));
+    }
     let q = Quaternion::new(v[6], v[3], v[4], v[5]);
     let norm = q.norm();
     if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
@@ -311,7 +327,7 @@ pub fn format_tum_line(pose: &Pose) -> String {
 }
 
 fn read_poses(path: &Path, frames: usize) -> Result<Vec<Pose>, SequenceError> {
-    let text = fs::read_to_string(path).map_err(|e| io_err(path, e))?;
+    let text = crate::files::read_text_capped(path, MAX_POSES_BYTES).map_err(|e| io_err(path, e))?;
     let at =
         |line: usize, kind, reason: String| SequenceError { path: path.to_owned(), line: Some(line), kind, reason };
     let mut poses: Vec<Pose> = Vec::with_capacity(frames);
@@ -351,7 +367,7 @@ fn read_poses(path: &Path, frames: usize) -> Result<Vec<Pose>, SequenceError> {
 }
 
 fn read_truth(path: &Path) -> Result<Truth, SequenceError> {
-    let text = fs::read_to_string(path).map_err(|e| io_err(path, e))?;
+    let text = crate::files::read_text_capped(path, MAX_TRUTH_BYTES).map_err(|e| io_err(path, e))?;
     let truth: Truth =
         serde_json::from_str(&text).map_err(|e| err(path, SequenceErrorKind::BadTruth, e.to_string()))?;
     for (i, p) in truth.polygons.iter().enumerate() {

@@ -6,6 +6,10 @@ use serde::{Deserialize, Serialize};
 /// Nanoseconds on the one clock that depth frames and poses share.
 pub type StampNs = u64;
 
+/// The world polymap maps reaches this far from its origin, m: a pose or a vertex further
+/// out is not a place a robot walks, and the polygon booleans lose their footing there.
+pub const MAX_COORDINATE_M: f64 = 1e6;
+
 /// Pinhole intrinsics of a depth image, with its depth unit.
 ///
 /// Pixel centres sit at integer coordinates (OpenCV convention): the ray of

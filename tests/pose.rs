@@ -2,7 +2,7 @@
 //! kind of bad pose refused, counted, and kept out.
 
 use nalgebra::{UnitQuaternion, Vector3};
-use polymap::pose::{NoPose, PoseBuffer, PoseRejected, RawPose};
+use polymap::pose::{NoPose, PoseBuffer, PoseLimits, PoseRejected, RawPose};
 
 const MS: u64 = 1_000_000;
 
@@ -88,4 +88,69 @@ fn a_flood_of_poses_keeps_memory_bounded_and_lookups_right() {
     let t = buf.at(9_500 * MS + MS / 2).unwrap();
     assert!((t.translation.x - 9.5005).abs() < 1e-9);
     assert!(matches!(buf.at(8_000 * MS), Err(NoPose::TooOld { .. })));
+}
+
+/// The limits `polymap run` uses by default, with "now" at `NOW`.
+fn live_buffer() -> PoseBuffer {
+    PoseBuffer::with_limits(100, PoseLimits::from_config(&polymap::config::PosesConfig::default()))
+}
+
+const NOW: u64 = 1_800_000_000 * 1_000_000_000;
+
+fn at(stamp_ns: u64, position: [f64; 3], quat_xyzw: [f64; 4]) -> RawPose {
+    RawPose { stamp_ns, position, quat_xyzw }
+}
+
+#[test]
+fn implausible_poses_are_refused_counted_and_never_move_the_newest_stamp() {
+    let mut buf = live_buffer();
+    let id = [0.0, 0.0, 0.0, 1.0];
+    buf.push_at(&at(NOW - 20 * MS, [1.0, 0.0, 0.5], id), NOW).unwrap();
+    buf.push_at(&at(NOW - 10 * MS, [1.01, 0.0, 0.5], id), NOW).unwrap();
+    let year_2038 = 2_147_483_647u64 * 1_000_000_000;
+    let s = (0.6f64).sqrt();
+    let cases = [
+        (at(NOW - 5 * MS, [1e308, 0.0, 0.5], id), "beyond"),
+        (at(NOW - 5 * MS, [1.0, 1e150, 0.5], id), "beyond"),
+        (at(NOW - 5 * MS, [1.0, 0.0, -2e4], id), "beyond the 10000 m"),
+        (at(NOW - 5 * MS, [1.0, 0.0, 0.5], [1e200, 0.0, 0.0, 1.0]), "not a rotation"),
+        (at(NOW - 5 * MS, [1.0, 0.0, 0.5], [s, s, 0.0, 0.0]), "norm 1.09"),
+        (at(NOW - 5 * MS, [1.0, 0.0, 0.5], [1e-200, 0.0, 0.0, 0.0]), "not a rotation"),
+        (at(year_2038, [1.0, 0.0, 0.5], id), "ahead of this machine's clock"),
+        (at(NOW + 30_000 * MS, [1.0, 0.0, 0.5], id), "ahead of this machine's clock"),
+    ];
+    for (raw, says) in &cases {
+        let err = buf.push_at(raw, NOW).unwrap_err();
+        assert!(err.to_string().contains(says), "{err} should say {says}");
+    }
+    assert_eq!(buf.counters.rejected, cases.len() as u64);
+    // The newest stamp is still the real one: the real stream goes on.
+    buf.push_at(&at(NOW, [1.02, 0.0, 0.5], id), NOW).unwrap();
+    let t = buf.at(NOW - 5 * MS).unwrap();
+    assert!((t.translation.x - 1.015).abs() < 1e-12);
+    // A stamp just ahead of the clock (within max_ahead_s) is a clock's jitter, not a lie.
+    buf.push_at(&at(NOW + 100 * MS, [1.03, 0.0, 0.5], id), NOW).unwrap();
+    assert_eq!(buf.counters.accepted, 4);
+}
+
+#[test]
+fn an_odometry_that_starts_over_is_followed_after_a_silence() {
+    let mut buf = live_buffer();
+    let id = [0.0, 0.0, 0.0, 1.0];
+    for k in 0..10u64 {
+        buf.push_at(&at(NOW - 1000 * MS + 10 * k * MS, [k as f64 * 0.01, 0.0, 0.5], id), NOW - 1000 * MS + 10 * k * MS)
+            .unwrap();
+    }
+    // Going back right away is a bad pose, refused.
+    let back = at(NOW - 2000 * MS, [0.0, 0.0, 0.5], id);
+    assert!(matches!(buf.push_at(&back, NOW - 900 * MS), Err(PoseRejected::StampNotIncreasing { .. })));
+    // After 1 s of silence (poses.restart_after_s), it is VINS starting over: followed.
+    let restart = NOW - 900 * MS + 1100 * MS;
+    buf.push_at(&at(NOW - 2000 * MS, [5.0, 0.0, 0.5], id), restart).unwrap();
+    buf.push_at(&at(NOW - 1990 * MS, [5.01, 0.0, 0.5], id), restart + 10 * MS).unwrap();
+    assert_eq!(buf.counters.restarts, 1);
+    assert_eq!(buf.len(), 2, "the old odometry's poses are gone");
+    let t = buf.at(NOW - 1995 * MS).unwrap();
+    assert!((t.translation.x - 5.005).abs() < 1e-12);
+    assert!(matches!(buf.at(NOW - 950 * MS), Err(NoPose::NotYet { .. })), "nothing of the old odometry answers");
 }

@@ -168,6 +168,7 @@ pub fn status(r: &crate::runtime::status::Report, stamp_ns: StampNs, frame_id: &
         latency_p99_ms: r.latency.p99,
         poses_accepted: r.poses.accepted,
         poses_refused: r.poses.rejected + r.poses.undecodable,
+        odometry_restarts: r.poses.restarts,
         requests_refused: r.requests_refused,
         snapshots_failed: r.snapshots_failed,
         drift_z: r.drift_z,

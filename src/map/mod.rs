@@ -174,6 +174,10 @@ pub struct PolygonMap {
 const MIN_CLEAR_SAMPLES: usize = 8;
 /// Samples a polygon gets for clearing (spread on a grid over its shape).
 const CLEAR_SAMPLES: f64 = 48.0;
+/// The most grid points across a shape's box that clearing samples are taken from.
+const MAX_SAMPLE_GRID: f64 = 64.0;
+/// A polygon smaller than this is no surface (a degenerate outline), m^2.
+const MIN_POLYGON_AREA_M2: f64 = 1e-6;
 /// Samples seen at a grazing angle (ray within ~9 deg of the plane) are not judged.
 const MIN_VIEW_COS: f64 = 0.15;
 /// Something over a surface's footprint nearer to it than this stands in its place, m.
@@ -230,14 +234,15 @@ impl PolygonMap {
                 None => true,
             })
             .collect();
-        let pose_finite = t_world_camera
-            .translation
-            .vector
-            .iter()
-            .chain(t_world_camera.rotation.coords.iter())
-            .all(|v| v.is_finite());
+        let t = t_world_camera.translation.vector;
+        let pose_finite = t.iter().chain(t_world_camera.rotation.coords.iter()).all(|v| v.is_finite())
+            && t.norm() <= crate::types::MAX_COORDINATE_M;
         if !pose_finite {
-            update.rejected.push("pose is not finite: frame skipped".into());
+            update.rejected.push(format!(
+                "pose at {:?} is not finite or beyond {} m: frame skipped",
+                t.as_slice(),
+                crate::types::MAX_COORDINATE_M
+            ));
         }
         self.counters.rejected += update.rejected.len() as u64;
         for why in &update.rejected {
@@ -707,11 +712,16 @@ pub fn polygon_problem(p: &Polygon) -> Option<String> {
         return Some(format!("outline has {} vertices, at least 3 needed", p.boundary.len()));
     }
     let all = p.boundary.iter().chain(p.holes.iter().flatten());
-    if all.clone().any(|v| !v.iter().all(|c| c.is_finite() && c.abs() < 1e6)) {
-        return Some("a vertex is not finite (or beyond 1000 km)".into());
+    if all.clone().any(|v| !v.iter().all(|c| c.is_finite() && c.abs() < crate::types::MAX_COORDINATE_M)) {
+        return Some(format!("a vertex is not finite (or beyond {} m)", crate::types::MAX_COORDINATE_M));
     }
     if p.holes.iter().any(|h| h.len() < 3) {
         return Some("a hole has under 3 vertices".into());
+    }
+    // A degenerate outline (a line, a bowtie whose lobes cancel) has no plane frame to hold it.
+    let area = Moments::of_polygon(&p.boundary, &p.holes, &n).weight;
+    if !(area >= MIN_POLYGON_AREA_M2) {
+        return Some(format!("its outline encloses {area:.3e} m^2: no surface"));
     }
     None
 }
@@ -736,18 +746,20 @@ fn refresh(e: &mut Entry) {
     e.depth = e.shape.minimum_rotated_rect().map_or(0.0, |r| min_side(&r));
     e.samples.clear();
     if let Some(r) = geo::BoundingRect::bounding_rect(&e.shape) {
-        let step = (e.area / CLEAR_SAMPLES).sqrt().max(0.01);
-        let mut y = r.min().y + step / 2.0;
-        while y < r.max().y {
-            let mut x = r.min().x + step / 2.0;
-            while x < r.max().x {
-                let c = Coord { x, y };
-                if e.shape.contains(&Point(c)) {
-                    e.samples.push(c);
+        // A grid of about CLEAR_SAMPLES points over the shape, never finer than 1 cm nor
+        // more than MAX_SAMPLE_GRID across: a thin shape in a wide box stays bounded.
+        let (w, h) = (r.width(), r.height());
+        let step = (e.area / CLEAR_SAMPLES).sqrt().max(0.01).max(w.max(h) / MAX_SAMPLE_GRID);
+        if step.is_finite() && step > 0.0 {
+            let (nx, ny) = ((w / step).ceil() as usize, (h / step).ceil() as usize);
+            for j in 0..ny.min(MAX_SAMPLE_GRID as usize) {
+                for i in 0..nx.min(MAX_SAMPLE_GRID as usize) {
+                    let c = Coord { x: r.min().x + (i as f64 + 0.5) * step, y: r.min().y + (j as f64 + 0.5) * step };
+                    if e.shape.contains(&Point(c)) {
+                        e.samples.push(c);
+                    }
                 }
-                x += step;
             }
-            y += step;
         }
     }
 }

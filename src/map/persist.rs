@@ -58,6 +58,9 @@ pub fn remove_stale_temps(path: &Path) -> Vec<PathBuf> {
     removed
 }
 
+/// The largest map file loaded: about 10 kB a polygon, so tens of thousands of polygons.
+const MAX_SNAPSHOT_BYTES: u64 = 1 << 30;
+
 /// Why a map file could not be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum LoadError {
@@ -70,7 +73,8 @@ pub enum LoadError {
 /// Reads a snapshot and makes `build` of it (a map, or the snapshot itself); a file that
 /// does not parse or that `build` refuses is renamed to `<name>.corrupt-<unix seconds>`.
 pub fn load<T>(path: &Path, build: impl FnOnce(&MapSnapshot) -> Result<T, String>) -> Result<T, LoadError> {
-    let bytes = std::fs::read(path).map_err(|source| LoadError::Read { path: path.to_owned(), source })?;
+    let bytes = crate::files::read_capped(path, MAX_SNAPSHOT_BYTES)
+        .map_err(|source| LoadError::Read { path: path.to_owned(), source })?;
     let parsed = serde_json::from_slice::<MapSnapshot>(&bytes).map_err(|e| e.to_string());
     let why = match parsed {
         Ok(s) => match build(&s) {

@@ -26,17 +26,27 @@ pub struct MockVinsOptions {
     pub duration: Option<Duration>,
 }
 
+impl MockVinsOptions {
+    /// Why these options cannot run, naming the command-line option.
+    pub fn problem(&self) -> Option<String> {
+        if !(self.rate_hz >= 0.1 && self.rate_hz <= 10_000.0) {
+            return Some(format!("--rate {} must be within 0.1..=10000 Hz", self.rate_hz));
+        }
+        if !(self.drift_mm_per_s.is_finite() && self.drift_mm_per_s.abs() <= 1e3) {
+            return Some(format!("--drift {} must be within -1000..=1000 mm/s", self.drift_mm_per_s));
+        }
+        None
+    }
+}
+
 /// The frames VINS-Fusion names its odometry's pose in, and the pose's body.
 pub const WORLD_FRAME: &str = "world";
 pub const BODY_FRAME: &str = "body";
 
 /// Publishes until `opts.duration` is over; returns how many poses went out.
 pub async fn run(seq: &Sequence, config: &Config, opts: MockVinsOptions) -> Result<u64> {
-    if !(opts.rate_hz > 0.0 && opts.rate_hz <= 10_000.0) {
-        bail!("--rate {} must be within (0, 10000] Hz", opts.rate_hz);
-    }
-    if !opts.drift_mm_per_s.is_finite() || opts.drift_mm_per_s.abs() > 1e3 {
-        bail!("--drift {} must be within [-1000, 1000] mm/s", opts.drift_mm_per_s);
+    if let Some(p) = opts.problem() {
+        bail!("{p}");
     }
     let clock = SequenceClock::new(seq)?;
     let mut poses = PoseBuffer::new(seq.len(), u64::MAX);

@@ -17,6 +17,10 @@ pub const ROUTER_PORT: u16 = 7447;
 
 /// Runs for `duration`; the map is saved where `config.map.snapshot_path` says.
 pub async fn demo(config: &Config, duration: Duration, vins_rate_hz: f64) -> Result<Report> {
+    let opts = crate::mock::vins::MockVinsOptions { rate_hz: vins_rate_hz, drift_mm_per_s: 0.0, duration: None };
+    if let Some(p) = opts.problem() {
+        anyhow::bail!("{}", p.replace("--rate", "--vins-rate"));
+    }
     let port = if std::net::TcpListener::bind(("127.0.0.1", ROUTER_PORT)).is_ok() {
         ROUTER_PORT
     } else {
@@ -34,12 +38,15 @@ pub async fn demo(config: &Config, duration: Duration, vins_rate_hz: f64) -> Res
     vins.zenoh.config_file = write("vins.json5", loopback_json5(None, &[port]))?;
     println!("polymap demo: clients connect to tcp/127.0.0.1:{port} (ROS 2 namespace {})", config.ros2.namespace);
     let seq = Sequence::open(&config.sources.depth.sequence)?;
-    let opts = crate::mock::vins::MockVinsOptions { rate_hz: vins_rate_hz, drift_mm_per_s: 0.0, duration: None };
     let vins_task = tokio::spawn(async move { crate::mock::vins::run(&seq, &vins, opts).await });
     let summary = super::run(&mapper, Some(duration)).await;
-    vins_task.abort();
-    if let Ok(Err(e)) = vins_task.await {
-        tracing::error!("mock VINS: {e:#}");
+    if vins_task.is_finished() {
+        // The mock VINS only ends by failing: the demo mapped without poses.
+        if let Ok(Err(e)) = vins_task.await {
+            anyhow::bail!("the mock VINS failed: {e:#}");
+        }
+    } else {
+        vins_task.abort();
     }
     summary
 }

@@ -49,8 +49,8 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
     let session = crate::ros2::session::open(crate::ros2::session::config(&config.zenoh.config_file)?).await?;
     let node = Arc::new(Node::new(&session, config.ros2.node_options()).await?);
     let interface = Interface::new(config);
-    let gap_ns = (config.poses.max_gap_s * 1e9) as u64;
-    let poses = Arc::new(Mutex::new(PoseBuffer::new(4096, gap_ns)));
+    let poses =
+        Arc::new(Mutex::new(PoseBuffer::with_limits(4096, crate::pose::PoseLimits::from_config(&config.poses))));
     let _odometry = odometry::subscribe(&node, &interface, poses.clone()).await?;
     let map = Arc::new(Mutex::new(crate::replay::initial_map(config)));
     let counters = Arc::new(Counters::default());

@@ -83,6 +83,7 @@ impl std::fmt::Display for Report {
             ("frames not extracted", self.extraction_failed),
             ("requests refused", self.requests_refused),
             ("snapshots failed", self.snapshots_failed),
+            ("odometry restarts", self.poses.restarts),
         ] {
             if n > 0 {
                 write!(f, "; {what} {n}")?;

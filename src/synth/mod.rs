@@ -127,8 +127,8 @@ impl SynthOptions {
         if !(self.drift_mm_per_frame.is_finite() && self.drift_mm_per_frame.abs() <= 100.0) {
             return Some(format!("--drift {} must be within -100..=100 mm per frame", self.drift_mm_per_frame));
         }
-        if !(self.fps > 0.0 && self.fps <= 1000.0) {
-            return Some(format!("--fps {} must be within (0, 1000]", self.fps));
+        if !(self.fps >= 0.1 && self.fps <= 1000.0) {
+            return Some(format!("--fps {} must be within 0.1..=1000", self.fps));
         }
         None
     }

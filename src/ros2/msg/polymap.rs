@@ -96,6 +96,8 @@ ros_message! {
         pub latency_p99_ms: f64,
         pub poses_accepted: u64,
         pub poses_refused: u64,
+        /// Times the odometry started over (stamps going back after a silence) and was followed.
+        pub odometry_restarts: u64,
         /// Service requests that did not decode.
         pub requests_refused: u64,
         /// Map snapshots that could not be written (each retried the next period).
