@@ -12,6 +12,7 @@ pub mod config;
 pub mod eval;
 pub mod extract;
 pub mod files;
+pub mod fuzz;
 pub mod interface;
 pub mod map;
 pub mod mock;

@@ -174,6 +174,16 @@ enum Command {
         #[arg(long)]
         config: Option<PathBuf>,
     },
+    /// A Zenoh router in a process of its own (as rmw_zenohd), with the given Zenoh config
+    /// (e.g. config/zenoh/robot/router.json5: mutual TLS and access control)
+    Router {
+        /// Zenoh JSON5 config file (its mode is set to router)
+        #[arg(long)]
+        config: PathBuf,
+        /// Stop after this many seconds (default: until SIGINT / SIGTERM)
+        #[arg(long)]
+        duration: Option<f64>,
+    },
     /// Check a config file and print it with every default filled in
     Config { file: PathBuf },
 }
@@ -347,6 +357,10 @@ fn run(cli: Cli) -> Result<()> {
                 }
             })?;
             tracing::info!("mock VINS: {sent} poses published");
+        }
+        Command::Router { config, duration } => {
+            let duration = duration.map(seconds).transpose()?;
+            tokio::runtime::Runtime::new()?.block_on(polymap::runtime::router::run(&config, duration))?;
         }
         Command::Config { file } => {
             let config = Config::load(&file)?;

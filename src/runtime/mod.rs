@@ -10,7 +10,8 @@
 //! - [`slot`]: the newest-frame slot; [`worker`]: the extractor thread;
 //! - [`sources`]: the depth source and the D435i streams; [`odometry`]: poses in;
 //! - [`publish`]: what the worker made, out; [`services`]: the map and footholds on request;
-//! - [`status`]: counters and the status line; [`demo`]: mock VINS and mapper together.
+//! - [`status`]: counters and the status line; [`demo`]: mock VINS and mapper together;
+//! - [`router`]: `polymap router`, a Zenoh router in a process of its own.
 //!
 //! When extraction falls behind, the newest frame wins. A frame with no odometry pose within
 //! the gap is skipped and counted. SIGINT / SIGTERM (or `--duration`) stop it; the map is
@@ -19,6 +20,7 @@
 pub mod demo;
 pub mod odometry;
 pub mod publish;
+pub mod router;
 pub mod services;
 pub mod slot;
 pub mod sources;

@@ -3,7 +3,7 @@
 //! VINS on realsense-ros's topics.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 
 use anyhow::{Result, anyhow, bail};
 
@@ -49,6 +49,8 @@ async fn realsense_depth(
     stop: Arc<AtomicBool>,
     counters: Arc<Counters>,
 ) -> Result<tokio::task::JoinHandle<()>> {
+    use std::sync::atomic::Ordering;
+
     use anyhow::Context;
 
     use crate::camera::realsense::RealsenseDepth;
@@ -153,6 +155,8 @@ async fn real_d435i(
     tx: tokio::sync::mpsc::Sender<D435iSample>,
     stop: Arc<AtomicBool>,
 ) -> Result<()> {
+    use std::sync::atomic::Ordering;
+
     use anyhow::Context;
 
     use crate::camera::realsense::RealsenseD435i;

@@ -1,0 +1,137 @@
+//! Entry points for fuzzing what polymap reads from outside: each takes any bytes and must
+//! return (never panic, never hang, never allocate far beyond its input). The cargo-fuzz
+//! targets in `fuzz/` call them for long runs; `tests/fuzz.rs` runs them on the committed
+//! corpus (`fuzz/corpus/<target>/`) and on mutations of it in every test run.
+
+use crate::config::Config;
+use crate::interface::convert;
+use crate::map::{MapSnapshot, PolygonMap};
+use crate::pose::{PoseBuffer, PoseLimits};
+use crate::ros2::cdr;
+use crate::ros2::msg::{GetFootholdRequest, GetMapRequest, Odometry, PoseStamped};
+
+/// The targets, by name (the folder names under `fuzz/corpus/`).
+pub const TARGETS: [(&str, fn(&[u8])); 5] = [
+    ("odometry", odometry),
+    ("service_request", service_request),
+    ("config", config),
+    ("sequence", sequence),
+    ("snapshot", snapshot),
+];
+
+/// A message on the odometry topic, as Odometry and as PoseStamped, into a pose buffer with
+/// the live limits.
+pub fn odometry(data: &[u8]) {
+    let mut buffer = PoseBuffer::with_limits(8, PoseLimits::from_config(&Default::default()));
+    if let Ok(m) = cdr::from_slice::<Odometry>(data)
+        && let Ok(raw) = convert::pose_of_odometry(&m)
+        && buffer.push(&raw).is_ok()
+    {
+        let _ = buffer.at(raw.stamp_ns);
+    }
+    if let Ok(m) = cdr::from_slice::<PoseStamped>(data)
+        && let Ok(raw) = convert::pose_of_pose_stamped(&m)
+    {
+        let _ = buffer.push(&raw);
+    }
+}
+
+/// A service request: GetMap's, and GetFoothold's answered on a small map.
+pub fn service_request(data: &[u8]) {
+    let _ = cdr::from_slice::<GetMapRequest>(data);
+    if let Ok(r) = cdr::from_slice::<GetFootholdRequest>(data) {
+        let p = [r.point.x, r.point.y, r.point.z];
+        if p.iter().all(|v| v.is_finite()) {
+            let map = small_map();
+            let _ = convert::foothold(&crate::map::foothold::foothold(&map, p), 0, "world");
+        }
+    }
+}
+
+/// A config file's text.
+pub fn config(data: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(data) {
+        let _ = Config::parse(text, std::path::Path::new("fuzz.toml"));
+    }
+}
+
+/// A sequence directory made of the input: camera.toml, poses.txt and one depth PNG, split
+/// at [`SEQUENCE_SEPARATOR`]; opened and its frame read as polymap reads any sequence.
+pub fn sequence(data: &[u8]) {
+    let mut parts = split(data, SEQUENCE_SEPARATOR);
+    let (camera, poses, png) = (parts.next().unwrap_or(&[]), parts.next().unwrap_or(&[]), parts.next().unwrap_or(&[]));
+    let Ok(dir) = tempfile::tempdir() else { return };
+    let write = |name: &str, bytes: &[u8]| std::fs::write(dir.path().join(name), bytes).is_ok();
+    if !(write("camera.toml", camera)
+        && write("poses.txt", poses)
+        && std::fs::create_dir(dir.path().join("depth")).is_ok())
+    {
+        return;
+    }
+    if !write("depth/000000.png", png) {
+        return;
+    }
+    if let Ok(seq) = crate::sequence::Sequence::open(dir.path()) {
+        let _ = seq.depth(0);
+    }
+}
+
+/// Between the parts of a `sequence` input.
+pub const SEQUENCE_SEPARATOR: &[u8] = b"\n\xff--polymap--\xff\n";
+
+/// A saved map's JSON, loaded as polymap loads a snapshot at start.
+pub fn snapshot(data: &[u8]) {
+    if let Ok(s) = serde_json::from_slice::<MapSnapshot>(data) {
+        let _ = PolygonMap::from_snapshot(&Default::default(), &s);
+    }
+}
+
+fn split<'a>(data: &'a [u8], sep: &'a [u8]) -> impl Iterator<Item = &'a [u8]> {
+    let mut rest = Some(data);
+    std::iter::from_fn(move || {
+        let r = rest?;
+        match r.windows(sep.len()).position(|w| w == sep) {
+            Some(i) => {
+                rest = Some(&r[i + sep.len()..]);
+                Some(&r[..i])
+            }
+            None => {
+                rest = None;
+                Some(r)
+            }
+        }
+    })
+}
+
+/// Two treads and a floor.
+fn small_map() -> MapSnapshot {
+    use crate::map::{Label, MapPolygon};
+    let square = |x: f64, z: f64, id: u64, label: Label| {
+        let ring = vec![[x, -0.5, z], [x + 0.28, -0.5, z], [x + 0.28, 0.5, z], [x, 0.5, z]];
+        MapPolygon {
+            id,
+            label,
+            normal: [0.0, 0.0, 1.0],
+            offset: -z,
+            area: 0.28,
+            centroid: [x + 0.14, 0.0, z],
+            boundary: ring.clone(),
+            holes: vec![],
+            convex_pieces: vec![ring.clone()],
+            inset: ring,
+            observations: 2,
+            step: Some(id as u32),
+        }
+    };
+    MapSnapshot {
+        frame: "world".into(),
+        drift_z: 0.0,
+        drift_var: 0.0,
+        stair: None,
+        polygons: vec![
+            square(-0.3, 0.0, 0, Label::Floor),
+            square(0.0, 0.15, 1, Label::Tread),
+            square(0.28, 0.3, 2, Label::Tread),
+        ],
+    }
+}
