@@ -1,5 +1,6 @@
-//! A planner-side client: follows the map's updates, asks for the whole map once, and asks
-//! for the foothold under a point, the way a footstep planner would every step. It is a
+//! A planner-side client: follows the versioned map (updates, the latched whole map, and
+//! `get_map` when updates were missed) with polymap::interface::follower, then asks for the
+//! foothold under a point, the way a footstep planner would every step. It is a
 //! ROS 2 node on rmw_zenoh (polymap's own ROS 2 layer), so the same calls reach polymap
 //! beside any other ROS 2 node.
 //!
@@ -11,6 +12,7 @@
 use std::time::Duration;
 
 use polymap::config::Config;
+use polymap::interface::follower::MapFollower;
 use polymap::interface::{Interface, convert};
 use polymap::ros2::msg::{GetFootholdRequest, GetMapRequest, Point};
 use polymap::ros2::{Node, NodeOptions, RosName};
@@ -31,28 +33,66 @@ async fn main() -> anyhow::Result<()> {
     .await?;
     let interface = Interface::new(&config);
 
-    // Updates: whole polygons added or changed, ids removed.
+    // Follow the map as the planner contract says (README, "The planner contract"): updates
+    // and the latched whole map into one follower, a whole map asked for whenever it says so.
+    let (update_tx, mut updates) = tokio::sync::mpsc::unbounded_channel();
     let _updates = node
-        .subscribe(&interface.map_updates, |u| match u {
-            Ok(u) => println!(
-                "update: {} added, {} changed, {} removed; drift {:.1} mm",
-                u.added.len(),
-                u.changed.len(),
-                u.removed.len(),
-                u.drift_z * 1e3
-            ),
+        .subscribe(&interface.map_updates, move |u| match u {
+            Ok(u) => drop(update_tx.send(u)),
             Err(e) => eprintln!("undecodable update: {e}"),
         })
         .await?;
-    tokio::time::sleep(Duration::from_secs(2)).await;
-
-    // The whole map at once, as a planner joining late gets it.
+    let (map_tx, mut maps) = tokio::sync::mpsc::unbounded_channel();
+    let _map = node
+        .subscribe(&interface.map, move |m| match m {
+            Ok(m) => drop(map_tx.send(m)),
+            Err(e) => eprintln!("undecodable map: {e}"),
+        })
+        .await?;
     let get_map = node.client(&interface.get_map).await?;
-    let map = get_map.call(&GetMapRequest::default(), Duration::from_secs(5)).await?.map;
-    println!("map: {} polygons in frame {:?}", map.polygons.len(), map.header.frame_id);
+    let mut follower = MapFollower::new();
+    let until = tokio::time::Instant::now() + Duration::from_secs(3);
+    loop {
+        if follower.needs_whole_map()
+            && let Ok(r) = get_map.call(&GetMapRequest::default(), Duration::from_secs(2)).await
+        {
+            follower.on_map(r.map);
+        }
+        tokio::select! {
+            Some(u) = updates.recv() => {
+                let (added, changed, removed, drift) = (u.added.len(), u.changed.len(), u.removed.len(), u.drift_z);
+                let version = u.version;
+                let outcome = follower.on_update(u);
+                println!(
+                    "update to version {version}: {added} added, {changed} changed, {removed} removed; \
+                     drift {:.1} mm; {outcome:?}",
+                    drift * 1e3
+                );
+            }
+            Some(m) = maps.recv() => drop(follower.on_map(m)),
+            _ = tokio::time::sleep_until(until) => break,
+        }
+    }
+    let Some(map) = follower.map() else { anyhow::bail!("no map from {endpoint}: is a mapper running?") };
+    println!(
+        "map: {} polygons in frame {:?}, version {} ({:?})",
+        map.polygons.len(),
+        map.header.frame_id,
+        map.version,
+        follower.counters
+    );
     for p in &map.polygons {
         let label = convert::label_of(p.label).map_or("?".into(), |l| format!("{l:?}").to_lowercase());
-        println!("  {:>4} {:<8} step {:>2}  area {:.3} m2  z {:.3} m", p.id, label, p.step, p.area, p.centroid.z);
+        let steppable: usize = p.insets.iter().map(|r| r.boundary.len()).sum();
+        println!(
+            "  {:>4} {:<8} step {:>2}  area {:.3} m2  z {:.3} m  inset {} piece(s), {steppable} vertices",
+            p.id,
+            label,
+            p.step,
+            p.area,
+            p.centroid.z,
+            p.insets.len()
+        );
     }
 
     // The foothold under a point on the second tread of the mock stairs.

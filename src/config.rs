@@ -32,6 +32,7 @@ pub struct Config {
     pub poses: PosesConfig,
     pub zenoh: ZenohConfig,
     pub ros2: Ros2Config,
+    pub planar_terrain: PlanarTerrainConfig,
 }
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -422,6 +423,17 @@ pub struct Ros2Config {
     /// How polymap's topics are encoded: ROS 2 CDR, or JSON for looking at them with plain
     /// Zenoh tools.
     pub encoding: Encoding,
+    /// polymap's frame (REP 105's `map`): VINS's frame with the drift taken out. Polygons,
+    /// the map and the terrain are in it.
+    pub map_frame: String,
+    /// VINS's frame, the odometry's header frame (VINS-Fusion: `world`). /tf carries the
+    /// drift as the transform from the map frame to it.
+    pub odometry_frame: String,
+    /// Where the map-to-odometry transform goes.
+    pub tf_topic: RosName,
+    /// The whole map (topic `map`) and the RViz markers of all of it go out at most this
+    /// often, when the map changed, s.
+    pub whole_map_period_s: f64,
 }
 
 impl Default for Ros2Config {
@@ -435,6 +447,42 @@ impl Default for Ros2Config {
             odometry: RosName::parse("/odometry").expect("a valid name"),
             odometry_type: OdometryType::Odometry,
             encoding: Encoding::Cdr,
+            map_frame: "map".into(),
+            odometry_frame: "world".into(),
+            tf_topic: RosName::parse("/tf").expect("a valid name"),
+            whole_map_period_s: 1.0,
+        }
+    }
+}
+
+/// The map as convex_plane_decomposition_msgs/PlanarTerrain, for legged planners that read it
+/// (OCS2's perceptive locomotion, elevation_mapping_cupy's plane segmentation consumers).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PlanarTerrainConfig {
+    pub enabled: bool,
+    /// Where those planners listen by default.
+    pub topic: RosName,
+    /// Sent at most this often, when the map changed, s.
+    pub period_s: f64,
+    /// The grid map: cell size and extent (x, y) around the robot, m.
+    pub resolution_m: f64,
+    pub length_x_m: f64,
+    pub length_y_m: f64,
+    /// Surfaces tilted more than this are not regions (nor in the elevation layer), degrees.
+    pub max_tilt_deg: f64,
+}
+
+impl Default for PlanarTerrainConfig {
+    fn default() -> Self {
+        PlanarTerrainConfig {
+            enabled: true,
+            topic: RosName::parse("/convex_plane_decomposition_ros/planar_terrain").expect("a valid name"),
+            period_s: 0.2,
+            resolution_m: 0.04,
+            length_x_m: 4.0,
+            length_y_m: 4.0,
+            max_tilt_deg: 30.0,
         }
     }
 }
@@ -543,7 +591,7 @@ impl Config {
             ));
         }
         check_range("pipeline.depth_edge_ratio", p.depth_edge_ratio, 1e-4, 10.0)?;
-        if p.closing_kernel_px % 2 == 0 || p.closing_kernel_px > 63 {
+        if p.closing_kernel_px.is_multiple_of(2) || p.closing_kernel_px > 63 {
             return Err((
                 "pipeline.closing_kernel_px".into(),
                 format!("{} must be odd and at most 63", p.closing_kernel_px),
@@ -591,6 +639,39 @@ impl Config {
         if !node_name_ok {
             return Err(("ros2.node".into(), format!("{:?} is not a ROS node name (letters, digits and '_')", r.node)));
         }
+        for (key, frame) in [("ros2.map_frame", &r.map_frame), ("ros2.odometry_frame", &r.odometry_frame)] {
+            let ok = !frame.is_empty()
+                && !frame.starts_with('/')
+                && frame.chars().all(|c| c.is_ascii_alphanumeric() || "_-/.".contains(c));
+            if !ok {
+                return Err((
+                    key.into(),
+                    format!("{frame:?} is not a tf2 frame id (letters, digits, '_-/.', no leading '/')"),
+                ));
+            }
+        }
+        if r.map_frame == r.odometry_frame {
+            return Err((
+                "ros2.map_frame".into(),
+                format!("{:?} is the odometry's frame too: the drift needs two", r.map_frame),
+            ));
+        }
+        check_range("ros2.whole_map_period_s", r.whole_map_period_s, 0.01, 3600.0)?;
+        let t = &self.planar_terrain;
+        check_range("planar_terrain.period_s", t.period_s, 0.01, 3600.0)?;
+        check_range("planar_terrain.resolution_m", t.resolution_m, 0.005, 1.0)?;
+        check_range("planar_terrain.length_x_m", t.length_x_m, t.resolution_m, 100.0)?;
+        check_range("planar_terrain.length_y_m", t.length_y_m, t.resolution_m, 100.0)?;
+        let cells = (t.length_x_m / t.resolution_m) * (t.length_y_m / t.resolution_m);
+        if cells > MAX_TERRAIN_CELLS {
+            return Err((
+                "planar_terrain.resolution_m".into(),
+                format!(
+                    "{cells:.0} cells in the grid map; at most {MAX_TERRAIN_CELLS:.0} (a coarser resolution or a smaller extent)"
+                ),
+            ));
+        }
+        check_range("planar_terrain.max_tilt_deg", t.max_tilt_deg, 0.0, 89.0)?;
         Ok(())
     }
 }
@@ -635,6 +716,9 @@ impl Config {
         Ok(())
     }
 }
+
+/// The most cells a terrain grid map may have (20 x 20 m at 2 cm: 4 MB a layer).
+const MAX_TERRAIN_CELLS: f64 = 1_000_000.0;
 
 /// A config value that cannot be used: its dotted key and why.
 pub type Invalid = (String, String);

@@ -10,8 +10,11 @@ use crate::pose::{PoseBuffer, PoseLimits};
 use crate::ros2::cdr;
 use crate::ros2::msg::{GetFootholdRequest, GetMapRequest, Odometry, PoseStamped};
 
+/// A fuzz target: takes any bytes, must never panic.
+pub type Target = fn(&[u8]);
+
 /// The targets, by name (the folder names under `fuzz/corpus/`).
-pub const TARGETS: [(&str, fn(&[u8])); 5] = [
+pub const TARGETS: [(&str, Target); 5] = [
     ("odometry", odometry),
     ("service_request", service_request),
     ("config", config),
@@ -118,12 +121,13 @@ fn small_map() -> MapSnapshot {
             boundary: ring.clone(),
             holes: vec![],
             convex_pieces: vec![ring.clone()],
-            inset: ring,
+            insets: vec![crate::map::Region { boundary: ring, holes: vec![] }],
             observations: 2,
             step: Some(id as u32),
         }
     };
     MapSnapshot {
+        version: 0,
         frame: "world".into(),
         drift_z: 0.0,
         drift_var: 0.0,

@@ -5,6 +5,12 @@
 //! see README.md for the picture and `../shared/DESIGN.md` for the conventions
 //! (metres, radians, nanosecond stamps, `T_a_b` maps frame b into frame a).
 
+// `!(x > 0.0)` is how this code says "not a positive number, NaN included": the NaN is the
+// point, so the negated comparison stays.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+// Image stencils index several rows by the same column; iterators would hide that.
+#![allow(clippy::needless_range_loop)]
+
 pub mod bench;
 pub mod camera;
 pub mod clock;

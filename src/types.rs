@@ -112,7 +112,7 @@ pub struct DepthFrame {
 impl DepthFrame {
     pub fn depth_m(&self, u: u32, v: u32) -> Option<f64> {
         let d = self.pixels[(v * self.width + u) as usize];
-        (d != 0).then(|| d as f64 * self.depth_scale)
+        (d != 0).then_some(d as f64 * self.depth_scale)
     }
 }
 
@@ -125,7 +125,7 @@ pub struct Pose {
 
 /// Seconds (as written in TUM files) to nanoseconds, rejecting what cannot be a stamp.
 pub fn seconds_to_ns(s: f64) -> Option<StampNs> {
-    (s.is_finite() && s >= 0.0 && s < 1.8e10).then(|| (s * 1e9).round() as StampNs)
+    (s.is_finite() && (0.0..1.8e10).contains(&s)).then(|| (s * 1e9).round() as StampNs)
 }
 
 /// Nanoseconds as decimal seconds with all nine digits, so that stamps round-trip exactly.

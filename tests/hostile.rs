@@ -69,7 +69,7 @@ fn mock_vins(dir: &Path, port: u16, seconds: u32) -> std::process::Child {
 fn last_status(stderr: &str) -> std::collections::HashMap<String, u64> {
     let line = stderr.lines().rev().find(|l| l.contains("frames in ")).unwrap_or_else(|| panic!("no status: {stderr}"));
     let words: Vec<&str> = line
-        .split(|c: char| c == ';' || c == ',')
+        .split([';', ','])
         .flat_map(|part| {
             let part = part.trim();
             // "<name words> <number>" pieces.
@@ -158,6 +158,7 @@ async fn implausible_poses_on_the_wire_are_refused_and_the_real_odometry_keeps_m
 
 fn snapshot_with(boundary: Vec<[f64; 3]>) -> MapSnapshot {
     MapSnapshot {
+        version: 0,
         frame: "world".into(),
         drift_z: 0.0,
         drift_var: 0.0,
@@ -172,7 +173,7 @@ fn snapshot_with(boundary: Vec<[f64; 3]>) -> MapSnapshot {
             boundary,
             holes: vec![],
             convex_pieces: vec![],
-            inset: vec![],
+            insets: vec![],
             observations: 3,
             step: Some(1),
         }],

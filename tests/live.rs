@@ -3,24 +3,19 @@
 //! polymap's own ROS 2 layer, receives frame polygons and map updates, calls the map and
 //! foothold services, and scores the map against the truth.
 
-use std::path::Path;
+mod common;
+
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
+use common::{planner_node, start_mapper};
 use polymap::config::Config;
 use polymap::interface::{Interface, convert};
 use polymap::map::{Label, MapSnapshot};
 use polymap::ros2::msg::{GetFootholdRequest, GetMapRequest, Point, Polygon};
-use polymap::ros2::session::{free_loopback_port, loopback, loopback_json5};
-use polymap::ros2::{Node, NodeOptions, RosName};
+use polymap::ros2::session::free_loopback_port;
 use polymap::sequence::Sequence;
-
-fn json5(dir: &Path, name: &str, listen: Option<u16>, connect: &[u16]) -> String {
-    let path = dir.join(format!("{name}.json5"));
-    std::fs::write(&path, loopback_json5(listen, connect)).unwrap();
-    path.display().to_string()
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
@@ -34,27 +29,9 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
     polymap::synth::generate(&opts, &seq_dir, |_, _| {}).unwrap();
     let port = free_loopback_port().unwrap();
     let snapshot = dir.path().join("map.json");
-    let mapper_cfg = dir.path().join("mapper.toml");
-    std::fs::write(
-        &mapper_cfg,
-        format!(
-            "[sources.depth]\nsequence = {:?}\nfps = 8\n[pipeline]\nbackend = \"cpu\"\n[map]\nsnapshot_path = {:?}\n[zenoh]\nconfig_file = {:?}\n",
-            seq_dir.display().to_string(),
-            snapshot.display().to_string(),
-            json5(dir.path(), "mapper", Some(port), &[])
-        ),
-    )
-    .unwrap();
-    let vins_cfg = dir.path().join("vins.toml");
-    std::fs::write(&vins_cfg, format!("[zenoh]\nconfig_file = {:?}\n", json5(dir.path(), "vins", None, &[port])))
-        .unwrap();
+    let extra = format!("[map]\nsnapshot_path = {:?}\n", snapshot.display().to_string());
+    let (mut mapper, vins_cfg) = start_mapper(dir.path(), &seq_dir, port, 8, &extra, 11);
     let bin = env!("CARGO_BIN_EXE_polymap");
-    let mut mapper = std::process::Command::new(bin)
-        .args(["run", "--duration", "11", "--config"])
-        .arg(&mapper_cfg)
-        .stderr(std::fs::File::create(dir.path().join("mapper.log")).unwrap())
-        .spawn()
-        .unwrap();
     let mut vins = std::process::Command::new(bin)
         .args(["mock-vins", seq_dir.to_str().unwrap(), "--rate", "100", "--duration", "12", "--config"])
         .arg(&vins_cfg)
@@ -63,22 +40,9 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
         .unwrap();
 
     // This test is a third peer, connected to the mapper: a ROS 2 node of its own.
-    let mut session = None;
-    for _ in 0..100 {
-        // The mapper may not be listening yet.
-        if let Ok(s) = polymap::ros2::session::open(loopback(None, &[port])).await
-            && s.info().peers_zid().await.next().is_some()
-        {
-            session = Some(s);
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
-    let session = session.expect("the mapper's Zenoh peer never answered");
+    let (session, node) = planner_node(port, "live_test").await;
     let config = Config::default();
     let interface = Interface::new(&config);
-    let options = NodeOptions { namespace: RosName::root(), name: "live_test".into(), ..config.ros2.node_options() };
-    let node = Node::new(&session, options).await.unwrap();
     let (frames, updates) = (Arc::new(AtomicU64::new(0)), Arc::new(AtomicU64::new(0)));
     let f = frames.clone();
     // Which frames the mapper processed, by their stamps: the truth it is held to is what

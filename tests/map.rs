@@ -60,13 +60,136 @@ fn overlapping_views_merge_into_their_true_non_convex_union() {
     let l_area = 0.3 + 0.3 - 0.09;
     assert!((p.area - l_area).abs() < 1e-4, "area {} is the L's {l_area}, not its hull's", p.area);
     assert_eq!(p.observations, 4);
-    assert!(p.convex_pieces.len() >= 2, "an L needs at least two convex pieces");
-    let pieces: f64 = p.convex_pieces.iter().map(|r| ring_area(r)).sum();
-    assert!((pieces - p.area).abs() < 1e-9, "convex pieces cover {pieces} m^2");
     // The inset lies 5 cm inside: arms [0.05, 0.95] x [0.05, 0.25] and their mirror.
-    let inset = ring_area(&p.inset);
+    assert_eq!(p.insets.len(), 1);
+    let inset = ring_area(&p.insets[0].boundary);
     let want = 2.0 * 0.9 * 0.2 - 0.2 * 0.2;
     assert!((inset - want).abs() < 2e-3, "inset area {inset}, expected about {want}");
+    assert!(p.convex_pieces.len() >= 2, "an L needs at least two convex pieces");
+    let pieces: f64 = p.convex_pieces.iter().map(|r| ring_area(r)).sum();
+    assert!((pieces - inset).abs() < 1e-9, "convex pieces cover {pieces} m^2 of the inset's {inset}");
+}
+
+/// A map polygon's part seen from above as a 2-D shape.
+fn top_down(boundary: &[[f64; 3]], holes: &[Vec<[f64; 3]>]) -> Shape<f64> {
+    let ring = |r: &[[f64; 3]]| LineString::from(r.iter().map(|p| (p[0], p[1])).collect::<Vec<_>>());
+    Shape::new(ring(boundary), holes.iter().map(|h| ring(h)).collect())
+}
+
+/// Area of `part` outside `whole`, m^2.
+fn outside(part: &Shape<f64>, whole: &geo::MultiPolygon<f64>) -> f64 {
+    geo::MultiPolygon(vec![part.clone()]).difference(whole).unsigned_area()
+}
+
+/// A horizontal polygon at height `z` with outline `xy` and `holes` (world), mapped from
+/// two frames.
+fn mapped(xy: &[[f64; 2]], holes: &[Vec<[f64; 2]>], z: f64) -> polymap::map::MapPolygon {
+    let (pose, intr) = camera();
+    let mut map = PolygonMap::new(&MapConfig::default());
+    let mut p = seen(xy, z, &pose);
+    p.holes = holes.iter().map(|h| seen(h, z, &pose).boundary).collect();
+    map.update(&[p.clone()], &pose, &intr, None);
+    map.update(&[p], &pose, &intr, None);
+    let snap = map.snapshot();
+    assert_eq!(snap.polygons.len(), 1);
+    snap.polygons.into_iter().next().unwrap()
+}
+
+#[test]
+fn insets_keep_every_piece_and_every_hole_and_convex_pieces_lie_in_them() {
+    let margin = MapConfig::default().foot_margin_m;
+    // A 1 x 0.6 m tread with a 0.2 m square hole in its middle.
+    let hole = rect(0.4, 0.2, 0.6, 0.4);
+    let p = mapped(&rect(0.0, 0.0, 1.0, 0.6), std::slice::from_ref(&hole), 0.15);
+    assert_eq!(p.holes.len(), 1, "the tread keeps its hole");
+    assert_eq!(p.insets.len(), 1, "one inset");
+    assert_eq!(p.insets[0].holes.len(), 1, "the inset keeps the hole");
+    let inset = top_down(&p.insets[0].boundary, &p.insets[0].holes);
+    // The hole grows by the margin (rounded corners), the outline shrinks by it.
+    let grown_hole = ring_area(&p.insets[0].holes[0]);
+    let square_grown = (0.2 + 2.0 * margin).powi(2);
+    let rounded = square_grown - (4.0 - std::f64::consts::PI) * margin * margin;
+    assert!((grown_hole - rounded).abs() < 2e-3, "hole grown to {grown_hole} m^2, about {rounded}");
+    let want = (1.0 - 2.0 * margin) * (0.6 - 2.0 * margin) - rounded;
+    assert!((inset.unsigned_area() - want).abs() < 2e-3, "inset {} m^2, about {want}", inset.unsigned_area());
+    // The convex pieces tile the inset, and none reaches into the grown hole.
+    let inset_mp = geo::MultiPolygon(vec![inset.clone()]);
+    let mut sum = 0.0;
+    for piece in &p.convex_pieces {
+        let s = top_down(piece, &[]);
+        sum += s.unsigned_area();
+        assert!(outside(&s, &inset_mp) < 1e-9, "a convex piece leaves the inset");
+    }
+    assert!((sum - inset.unsigned_area()).abs() < 1e-9, "pieces {sum} m^2");
+}
+
+#[test]
+fn a_necked_polygon_keeps_both_pieces_of_its_inset() {
+    // Two 0.4 m squares joined by a 6 cm neck: the 5 cm margin closes the neck.
+    let outline = vec![
+        [0.0, 0.0],
+        [0.4, 0.0],
+        [0.4, 0.17],
+        [0.6, 0.17],
+        [0.6, 0.0],
+        [1.0, 0.0],
+        [1.0, 0.4],
+        [0.6, 0.4],
+        [0.6, 0.23],
+        [0.4, 0.23],
+        [0.4, 0.4],
+        [0.0, 0.4],
+    ];
+    let p = mapped(&outline, &[], 0.0);
+    assert_eq!(
+        p.insets.len(),
+        2,
+        "both squares' insets: {:?}",
+        p.insets.iter().map(|r| ring_area(&r.boundary)).collect::<Vec<_>>()
+    );
+    for r in &p.insets {
+        let a = ring_area(&r.boundary);
+        assert!((a - 0.3 * 0.3).abs() < 2e-3, "each piece is a 0.3 m square: {a}");
+    }
+    let x_extent = |r: &polymap::map::Region| {
+        r.boundary.iter().fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v[0]), hi.max(v[0])))
+    };
+    let extents: Vec<(f64, f64)> = p.insets.iter().map(x_extent).collect();
+    assert!(
+        extents.iter().any(|&(_, hi)| hi < 0.4) && extents.iter().any(|&(lo, _)| lo > 0.6),
+        "one each side: {extents:?}"
+    );
+}
+
+#[test]
+fn the_foothold_answer_lies_inside_the_inset() {
+    use polymap::map::foothold::foothold;
+    let hole = rect(0.4, 0.2, 0.6, 0.4);
+    let p = mapped(&rect(0.0, 0.0, 1.0, 0.6), std::slice::from_ref(&hole), 0.15);
+    let inset = geo::MultiPolygon(p.insets.iter().map(|r| top_down(&r.boundary, &r.holes)).collect());
+    let snap =
+        MapSnapshot { version: 1, frame: "world".into(), drift_z: 0.0, drift_var: 0.0, stair: None, polygons: vec![p] };
+    // Beside the hole, in the hole, near the outline (inside the polygon but not the inset),
+    // and off the polygon.
+    for (q, inside) in [([0.2, 0.3], true), ([0.5, 0.3], false), ([0.98, 0.3], false), ([1.3, 0.3], false)] {
+        let f = foothold(&snap, [q[0], q[1], 0.2]).expect("a foothold");
+        let piece = top_down(&f.piece, &[]);
+        assert!(piece.unsigned_area() > 0.01, "at {q:?}: a region a foot fits in, {} m^2", piece.unsigned_area());
+        assert!(
+            outside(&piece, &inset) < 1e-9,
+            "at {q:?}: the region leaves the inset by {} m^2",
+            outside(&piece, &inset)
+        );
+        assert_eq!(f.distance == 0.0, inside, "at {q:?}: distance {}", f.distance);
+        assert!(f.piece.iter().all(|v| (v[2] - 0.15).abs() < 1e-9), "on the tread's plane");
+        if inside {
+            use geo::Contains;
+            assert!(piece.contains(&geo::Point::new(q[0], q[1])), "the region holds the point");
+            // The largest convex region round (0.2, 0.3) beside the hole: the inset's strip
+            // between its outline and the grown hole, 0.3 x 0.5 m.
+            assert!(piece.unsigned_area() > 0.99 * 0.3 * 0.5, "{} m^2", piece.unsigned_area());
+        }
+    }
 }
 
 #[test]
@@ -352,6 +475,32 @@ proptest! {
         let diff = union.xor(&geo::MultiPolygon(vec![s.clone()])).unsigned_area();
         // Boolean operations snap to a fixed grid: their own round-off is about 1e-9 m^2.
         prop_assert!(diff <= 1e-7 * area, "pieces and polygon differ by {diff}");
+    }
+
+    #[test]
+    fn the_convex_region_around_a_point_is_convex_inside_the_shape_and_holds_the_point(
+        s in star(12), hole in any::<bool>(), qx in -1.0..1.0f64, qy in -1.0..1.0f64,
+    ) {
+        use geo::{Contains, Distance, Euclidean};
+        let s = with_hole(s, hole);
+        let q = Coord { x: qx, y: qy };
+        let region = polymap::map::convex::convex_region_around(&s, q).expect("a star has area");
+        let n = region.len();
+        for i in 0..n {
+            let (a, b, c) = (region[i], region[(i + 1) % n], region[(i + 2) % n]);
+            let cross = (b.x - a.x) * (c.y - b.y) - (b.y - a.y) * (c.x - b.x);
+            prop_assert!(cross >= -1e-12, "a right turn in {region:?}");
+        }
+        let shape = Shape::new(LineString::from(region), vec![]);
+        prop_assert!(shape.unsigned_area() > 0.0);
+        let out = geo::MultiPolygon(vec![shape.clone()]).difference(&geo::MultiPolygon(vec![s.clone()])).unsigned_area();
+        prop_assert!(out <= 1e-7, "{out} m^2 outside the shape");
+        // A point well inside the shape lies in its region.
+        let inside = s.contains(&geo::Point(q)) && Euclidean.distance(&geo::Point(q), s.exterior()) > 1e-6
+            && s.interiors().iter().all(|h| Euclidean.distance(&geo::Point(q), h) > 1e-6);
+        if inside {
+            prop_assert!(Euclidean.distance(&geo::Point(q), &shape) < 1e-9, "the region misses the point");
+        }
     }
 
     #[test]

@@ -157,7 +157,7 @@ fn kill_9_during_replay_then_replay_loads_the_last_snapshot() {
     std::fs::write(
         &config,
         format!(
-            "[pipeline]\nbackend = \"cpu\"\n[map]\nsnapshot_path = {:?}\nsnapshot_period_s = 0.05\nload_at_start = true\n",
+            "[pipeline]\nbackend = \"cpu\"\n[map]\nsnapshot_path = {:?}\nsnapshot_period_s = 0.1\nload_at_start = true\n",
             snapshot.display().to_string()
         ),
     )
@@ -168,12 +168,15 @@ fn kill_9_during_replay_then_replay_loads_the_last_snapshot() {
         c.arg("replay").arg(&seq).arg("--config").arg(&config);
         c
     };
-    let mut child = replay().stderr(std::process::Stdio::null()).spawn().unwrap();
+    let log_path = dir.path().join("first-run.log");
+    let mut child = replay().stderr(std::fs::File::create(&log_path).unwrap()).spawn().unwrap();
     // Kill it as soon as a snapshot exists, mid-run.
     let started = std::time::Instant::now();
     while !snapshot.exists() {
         assert!(started.elapsed().as_secs() < 120, "no snapshot written");
-        assert!(child.try_wait().unwrap().is_none(), "replay ended before it could be killed");
+        if child.try_wait().unwrap().is_some() {
+            panic!("replay ended before it could be killed: {}", std::fs::read_to_string(&log_path).unwrap());
+        }
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
     child.kill().unwrap(); // SIGKILL

@@ -56,7 +56,10 @@ fn a_string_s_cdr_is_as_rmw_zenoh_s_design_writes_it() {
 #[test]
 fn own_messages_round_trip_and_json_is_readable() {
     let update = MapUpdate {
-        header: convert::header(5, "world"),
+        header: convert::header(5, "map"),
+        epoch: 1_790_000_000_000_000_000,
+        from_version: 41,
+        version: 42,
         added: vec![Polygon {
             id: 7,
             label: Polygon::LABEL_TREAD,
@@ -76,9 +79,11 @@ fn own_messages_round_trip_and_json_is_readable() {
     assert_eq!(json["removed"], serde_json::json!([3, 4]));
     let status = Status { frames_in: 9, ..Status::default() };
     assert_eq!(cdr::from_slice::<Status>(&cdr::to_vec(&status)).unwrap(), status);
-    let markers = convert::update_markers(&update);
-    assert_eq!(markers.markers.len(), 3, "one outline, two deletes");
-    assert_eq!(markers.markers[1].action, convert::MARKER_DELETE);
+    let map = msg::Map { header: update.header.clone(), polygons: update.added.clone(), ..msg::Map::default() };
+    let markers = convert::whole_map_markers(&map);
+    assert_eq!(markers.markers.len(), 2, "a DELETEALL, then the one outline");
+    assert_eq!(markers.markers[0].action, convert::MARKER_DELETEALL);
+    assert_eq!(markers.markers[1].action, convert::MARKER_ADD);
     let back: msg::MarkerArray = cdr::from_slice(&cdr::to_vec(&markers)).unwrap();
     assert_eq!(back, markers);
 }
@@ -150,17 +155,156 @@ fn polymap_msgs_hashes_stay_what_they_are() {
     // messages no longer match. Update polymap_msgs/ with it (the Python peer in
     // tests/ros2_peer.rs recomputes these from the .msg and .srv files).
     let pinned = [
-        (message_hash::<msg::Polygon>(), "RIHS01_12281223bdffdf385151e59b22c24e87b6b4985ae806c558971db56e8c627568"),
+        (message_hash::<msg::Polygon>(), "RIHS01_bf3b58e36276f91802eb75b844641f2ac19cbf861cb21d4ae18d98db4c84b2e0"),
         (
             message_hash::<msg::FramePolygons>(),
-            "RIHS01_fdce8f77f529cb5ddb877c0c88447e743d7df2d1911aab5136a765c2a6a9856f",
+            "RIHS01_88c4bc9fccf9e9e95263381890e3fac4aefbe3a811c6065f5c796891ead15222",
         ),
-        (message_hash::<msg::MapUpdate>(), "RIHS01_dcd14b3d645a381d12177c75e7a481baeaa729dbd7721587309642a749049ceb"),
-        (message_hash::<msg::Map>(), "RIHS01_d9dd1b185ccb508f630ce6c564a6aacd5b0fc078938cd5907a70bf5a2ed7d43e"),
+        (message_hash::<msg::MapUpdate>(), "RIHS01_5180482b3d1b22c764781e3a6dff0b2369056c9d513047fcf7e6ad4f73e73dca"),
+        (message_hash::<msg::Map>(), "RIHS01_8501f342fed76f738dd6d9e4a74d841400e0fe4edbf8f62772aeea3de94b1c56"),
         (message_hash::<msg::Foothold>(), "RIHS01_d26115d96a054f501d9035484e44efd87a0dabf66fd8dc041d707ec4e59b8d6a"),
-        (message_hash::<msg::Status>(), "RIHS01_b09c57b3921784b5da9f86350a667b625882fa61ed5dd0fb5470f28a4ec18fa7"),
-        (service_hash::<msg::GetMap>(), "RIHS01_9e28fc1f21b33300870968b564793b80e522fa0d192b43eb0bc3cd913929aed3"),
+        (message_hash::<msg::Status>(), "RIHS01_60bd89eec0cc25e5fd6f0095ab83e8ed4b63c59a62a5a806ea4970c9aa32b5db"),
+        (service_hash::<msg::GetMap>(), "RIHS01_046849d6b99467e8f154b19250d5d4ea699ca8172c0450d1070b84a4f9da5697"),
         (service_hash::<msg::GetFoothold>(), "RIHS01_160e108c4c57519c6ee265867964cd138069183f4f278b046e095327834391b8"),
+        (message_hash::<msg::Region>(), "RIHS01_02f36fb3a034933b83025e74605cb9f8bd8c509fa461641830b6258de7406ae7"),
+    ];
+    for (computed, want) in pinned {
+        assert_eq!(computed, want);
+    }
+}
+
+/// convex_plane_decomposition_msgs/PlanarTerrain as rosbags 0.11.9 serialises it from the
+/// packages' ROS 2 .msg files (PlanarRegion, PolygonWithHoles2d, Polygon2d, Point2d,
+/// BoundingBox2d; grid_map_msgs GridMap and GridMapInfo; std_msgs Float32MultiArray): one
+/// 0.2 m square region at (1, 2, 0.05) with a 0.1 m inset, and a 3 x 2 grid at 0.1 m in
+/// `odom` whose one layer holds 10 r + c with (2, 1) NaN, column-major.
+const PLANAR_TERRAIN_CDR: [&str; 25] = [
+    "00 01 00 00 01 00 00 00 00 00 00 00 00 00 00 00",
+    "00 00 f0 3f 00 00 00 00 00 00 00 40 9a 99 99 99",
+    "99 99 a9 3f 00 00 00 00 00 00 00 00 00 00 00 00",
+    "00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00",
+    "00 00 f0 3f cd cc cc bd cd cc cc bd cd cc cc 3d",
+    "cd cc cc 3d 04 00 00 00 cd cc cc bd cd cc cc bd",
+    "cd cc cc 3d cd cc cc bd cd cc cc 3d cd cc cc 3d",
+    "cd cc cc bd cd cc cc 3d 00 00 00 00 01 00 00 00",
+    "04 00 00 00 cd cc 4c bd cd cc 4c bd cd cc 4c 3d",
+    "cd cc 4c bd cd cc 4c 3d cd cc 4c 3d cd cc 4c bd",
+    "cd cc 4c 3d 00 00 00 00 01 00 00 00 00 65 cd 1d",
+    "05 00 00 00 6f 64 6f 6d 00 00 00 00 9a 99 99 99",
+    "99 99 b9 3f 33 33 33 33 33 33 d3 3f 9a 99 99 99",
+    "99 99 c9 3f 00 00 00 00 00 00 f0 3f 00 00 00 00",
+    "00 00 00 40 00 00 00 00 00 00 00 00 00 00 00 00",
+    "00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00",
+    "00 00 00 00 00 00 00 00 00 00 f0 3f 01 00 00 00",
+    "0a 00 00 00 65 6c 65 76 61 74 69 6f 6e 00 00 00",
+    "00 00 00 00 01 00 00 00 02 00 00 00 0d 00 00 00",
+    "63 6f 6c 75 6d 6e 5f 69 6e 64 65 78 00 00 00 00",
+    "02 00 00 00 06 00 00 00 0a 00 00 00 72 6f 77 5f",
+    "69 6e 64 65 78 00 00 00 03 00 00 00 03 00 00 00",
+    "00 00 00 00 06 00 00 00 00 00 00 00 00 00 20 41",
+    "00 00 a0 41 00 00 80 3f 00 00 30 41 00 00 c0 7f",
+    "00 00 00 00",
+];
+
+#[test]
+fn planar_terrain_bytes_are_as_its_message_definitions_lay_them_out() {
+    let want: Vec<u8> = PLANAR_TERRAIN_CDR
+        .iter()
+        .flat_map(|line| line.split_whitespace().map(|b| u8::from_str_radix(b, 16).unwrap()))
+        .collect();
+    let square = |h: f32| msg::Polygon2d {
+        points: vec![
+            msg::Point2d { x: -h, y: -h },
+            msg::Point2d { x: h, y: -h },
+            msg::Point2d { x: h, y: h },
+            msg::Point2d { x: -h, y: h },
+        ],
+    };
+    let (rows, cols) = (3usize, 2usize);
+    let data: Vec<f32> = (0..cols)
+        .flat_map(|c| (0..rows).map(move |r| if (r, c) == (2, 1) { f32::NAN } else { (10 * r + c) as f32 }))
+        .collect();
+    let terrain = msg::PlanarTerrain {
+        planar_regions: vec![msg::PlanarRegion {
+            plane_parameters: msg::Pose {
+                position: msg::Point { x: 1.0, y: 2.0, z: 0.05 },
+                orientation: msg::Quaternion::default(),
+            },
+            bbox2d: msg::BoundingBox2d { min_x: -0.1, min_y: -0.1, max_x: 0.1, max_y: 0.1 },
+            boundary: msg::PolygonWithHoles2d { outer_boundary: square(0.1), holes: vec![] },
+            insets: vec![msg::PolygonWithHoles2d { outer_boundary: square(0.05), holes: vec![] }],
+        }],
+        gridmap: msg::GridMap {
+            header: msg::Header { stamp: msg::Time { sec: 1, nanosec: 500_000_000 }, frame_id: "odom".into() },
+            info: msg::GridMapInfo {
+                resolution: 0.1,
+                length_x: 0.3,
+                length_y: 0.2,
+                pose: msg::Pose {
+                    position: msg::Point { x: 1.0, y: 2.0, z: 0.0 },
+                    orientation: msg::Quaternion::default(),
+                },
+            },
+            layers: vec!["elevation".into()],
+            basic_layers: vec![],
+            data: vec![msg::Float32MultiArray {
+                layout: msg::MultiArrayLayout {
+                    dim: vec![
+                        msg::MultiArrayDimension { label: "column_index".into(), size: 2, stride: 6 },
+                        msg::MultiArrayDimension { label: "row_index".into(), size: 3, stride: 3 },
+                    ],
+                    data_offset: 0,
+                },
+                data,
+            }],
+            outer_start_index: 0,
+            inner_start_index: 0,
+        },
+    };
+    assert_eq!(cdr::to_vec(&terrain), want);
+    let back: msg::PlanarTerrain = cdr::from_slice(&want).unwrap();
+    assert!(back.gridmap.data[0].data[5].is_nan());
+    assert_eq!(back.planar_regions, terrain.planar_regions);
+}
+
+#[test]
+fn terrain_type_hashes_are_what_rosidl_computes() {
+    // Computed by rosidl's own generator (Jazzy, rosidl_generator_type_description) from the
+    // .msg files of grid_map (jazzy) and convex_plane_decomposition_msgs (ROS 2), and by
+    // rosbags the same: a planner built against those packages matches these keys.
+    let pinned = [
+        (message_hash::<msg::GridMap>(), "RIHS01_343b0e72887541beda6b035cc053f2d6fffaad9d6dcb2773c15a808dfca31fde"),
+        (message_hash::<msg::GridMapInfo>(), "RIHS01_0a36d6b5bc9af8463d1d5a5008ef9fcac0c1373ba090f80c3594e47cc565b745"),
+        (
+            message_hash::<msg::PlanarTerrain>(),
+            "RIHS01_99aee1c3ff6087f377e927f40eb25509760eba180f3cfcc7f479b7c49b23d2dd",
+        ),
+        (
+            message_hash::<msg::PlanarRegion>(),
+            "RIHS01_4a3f66cda630b01104964a4294bdb9d9cc9bd7e2f5d650487cde077dd376555f",
+        ),
+        (
+            message_hash::<msg::PolygonWithHoles2d>(),
+            "RIHS01_9f8206c6cc32e2e13e0662b5083f86cd95714ed96fc3f3fc87b3513008d6a6d6",
+        ),
+        (message_hash::<msg::Polygon2d>(), "RIHS01_ca4a091f78d788b4bef74e83d0d1e296a778965124f7eb144e9c394c9cc2a918"),
+        (message_hash::<msg::Point2d>(), "RIHS01_f852c21744ddc2dcc1124f3f139ad71f3e4c5eb6dc3a3d4a13db0ff7f2a59694"),
+        (
+            message_hash::<msg::BoundingBox2d>(),
+            "RIHS01_ed20580414a340e081b9655b16fe1e3c7ff99f5d8ac043528c06afe743ae4392",
+        ),
+        (
+            message_hash::<msg::Float32MultiArray>(),
+            "RIHS01_0599f6f85b4bfca379873a0b4375a0aca022156bd2d7021275d116ed1fa8bfe0",
+        ),
+        (
+            message_hash::<msg::MultiArrayLayout>(),
+            "RIHS01_4c66e6f78e740ac103a94cf63259f968e48c617e7699e829b63c21a5cb50dac6",
+        ),
+        (
+            message_hash::<msg::MultiArrayDimension>(),
+            "RIHS01_5e773a60a4c7fc8a54985f307c7837aa2994252a126c301957a24e31282c9cbe",
+        ),
     ];
     for (computed, want) in pinned {
         assert_eq!(computed, want);

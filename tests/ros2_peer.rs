@@ -71,12 +71,15 @@ fn a_ros_2_peer_on_rmw_zenoh_sees_polymap_s_topics_graph_and_services_and_feeds_
     // sent drop-on-congestion, as realsense-ros's are with rmw_zenoh: a stale IMU sample is
     // worth less than a late one).
     for (topic, s) in v["streams"].as_object().unwrap() {
+        // Status each second, the whole map and its markers at most each second when the
+        // map changed; the rest every frame or five times a second (the terrain).
         let least = if topic.ends_with("imu") {
             500
-        } else if topic.ends_with("status") {
-            10
+        } else if topic.ends_with("status") || topic.ends_with("/map") || topic.ends_with("markers") {
+            5
         } else {
-            20
+            // Every frame (8 Hz when the machine is idle, fewer under a loaded test run).
+            10
         };
         let count = s["count"].as_u64().unwrap();
         assert!(count >= least, "{topic}: {s}");
@@ -101,6 +104,9 @@ fn a_ros_2_peer_on_rmw_zenoh_sees_polymap_s_topics_graph_and_services_and_feeds_
         ("polymap_msgs/msg/FramePolygons", message_hash::<msg::FramePolygons>()),
         ("polymap_msgs/msg/MapUpdate", message_hash::<msg::MapUpdate>()),
         ("polymap_msgs/msg/Status", message_hash::<msg::Status>()),
+        ("polymap_msgs/msg/Map", message_hash::<msg::Map>()),
+        ("tf2_msgs/msg/TFMessage", message_hash::<msg::TfMessage>()),
+        ("convex_plane_decomposition_msgs/msg/PlanarTerrain", message_hash::<msg::PlanarTerrain>()),
         ("visualization_msgs/msg/MarkerArray", message_hash::<msg::MarkerArray>()),
         ("sensor_msgs/msg/Image", message_hash::<msg::Image>()),
         ("sensor_msgs/msg/Imu", message_hash::<msg::Imu>()),
@@ -155,6 +161,26 @@ fn a_ros_2_peer_on_rmw_zenoh_sees_polymap_s_topics_graph_and_services_and_feeds_
     );
     assert_eq!(last["without_pose"], early["without_pose"], "no frame without a pose once odometry flowed");
     assert_eq!(last["poses_refused"], 0, "{last}");
+
+    // The planar terrain as rosbags decodes it from the packages' own definitions: a grid
+    // map in the map frame, in grid_map's column-major layout, with heights of the stairs,
+    // and regions a planner can use (outlines counter-clockwise, holes clockwise, insets).
+    let t = &v["terrain"];
+    assert_eq!(t["frame_id"], "map", "{t}");
+    assert_eq!(t["layers"], serde_json::json!(["elevation", "smooth_planar", "region"]));
+    let (rows, cols) = (t["rows"].as_u64().unwrap(), t["cols"].as_u64().unwrap());
+    assert_eq!((rows, cols), (100, 100), "4 m at 4 cm");
+    assert_eq!(t["dims"], serde_json::json!([["column_index", cols, rows * cols], ["row_index", rows, rows]]));
+    assert_eq!(t["data_lengths"], serde_json::json!([rows * cols, rows * cols, rows * cols]));
+    assert!(t["finite_cells"].as_u64().unwrap() > 500, "{t}");
+    let range = &t["elevation_range"];
+    assert!(range[0].as_f64().unwrap() > -0.05 && range[1].as_f64().unwrap() < 1.0, "{t}");
+    assert!(t["regions"].as_u64().unwrap() >= 3 && t["regions"] == t["regions_with_insets"], "{t}");
+    for check in ["outlines_ccw", "holes_cw", "unit_quaternions"] {
+        assert_eq!(t[check], true, "{check}: {t}");
+    }
+    // The drift as the transform from the map frame to VINS's.
+    assert_eq!((&v["tf_last"]["parent"], &v["tf_last"]["child"]), (&"map".into(), &"world".into()), "{}", v["tf_last"]);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -183,10 +183,11 @@ pub fn step_errors(scores: &[TreadScore], rise: f64) -> Vec<f64> {
     let mut out = Vec::new();
     for a in scores {
         for b in scores {
-            if a.frame == b.frame && b.step == a.step + 1 {
-                if let (Some(za), Some(zb)) = (a.height, b.height) {
-                    out.push(((zb - za) - rise).abs());
-                }
+            if a.frame == b.frame
+                && b.step == a.step + 1
+                && let (Some(za), Some(zb)) = (a.height, b.height)
+            {
+                out.push(((zb - za) - rise).abs());
             }
         }
     }

@@ -427,6 +427,9 @@ fn finish(
     Ok((polygons, Stages { depth, smoothed, normals, canny, boundary, labels: seg.labels, regions, fits }))
 }
 
+/// What segmentation hands on: the regions, their pixels, and each one's plane if it has one.
+pub type Segmented = (Segmentation, Vec<Region>, Vec<Option<PlaneFit>>);
+
 /// Regions from the boundary map, their planes (`fit` is the batched RANSAC + refit of
 /// the backend), leaks split and fitted again, regions grown back to their true
 /// borders, outlines traced. Times the RANSAC calls as `ransac`, the rest as `contours`.
@@ -438,7 +441,7 @@ pub fn segment_and_fit(
     mut fit: impl FnMut(&PointBatch) -> Result<Vec<Option<PlaneFit>>, ExtractError>,
     times: &mut StageTimes,
     lap: &mut impl FnMut() -> f64,
-) -> Result<(Segmentation, Vec<Region>, Vec<Option<PlaneFit>>), ExtractError> {
+) -> Result<Segmented, ExtractError> {
     let dist = cfg.ransac_inlier_distance_m as f32;
     let min_ratio = cfg.ransac_min_inlier_ratio;
     let mut seg = Segmentation::components(boundary, MIN_REGION_PIXELS);

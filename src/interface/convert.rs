@@ -1,11 +1,12 @@
 //! Conversions between polymap's own types and its ROS messages, both ways, in one place.
 
 use crate::camera::ImuSample;
-use crate::map::{Label, MapPolygon, MapSnapshot};
+use crate::map::{Label, MapPolygon, MapSnapshot, Region};
 use crate::pose::RawPose;
 use crate::ros2::msg::{
     self, ColorRgba, Duration, FramePolygons, Header, Image, Imu, Map, MapUpdate, Marker, MarkerArray, Odometry, Point,
-    Pose, PoseStamped, PoseWithCovariance, Quaternion, Ring, Time, TwistWithCovariance, Vector3,
+    Pose, PoseStamped, PoseWithCovariance, Quaternion, Ring, TfMessage, Time, Transform, TransformStamped,
+    TwistWithCovariance, Vector3,
 };
 use crate::types::{Intrinsics, StampNs};
 
@@ -53,8 +54,15 @@ pub fn map_polygon(p: &MapPolygon) -> msg::Polygon {
         boundary: p.boundary.iter().map(|&v| v.into()).collect(),
         holes: p.holes.iter().map(|h| ring(h)).collect(),
         convex_pieces: p.convex_pieces.iter().map(|h| ring(h)).collect(),
-        inset: p.inset.iter().map(|&v| v.into()).collect(),
+        insets: p.insets.iter().map(region).collect(),
         observations: p.observations,
+    }
+}
+
+fn region(r: &Region) -> msg::Region {
+    msg::Region {
+        boundary: r.boundary.iter().map(|&v| v.into()).collect(),
+        holes: r.holes.iter().map(|h| ring(h)).collect(),
     }
 }
 
@@ -70,7 +78,14 @@ pub fn map_polygon_of(p: &msg::Polygon) -> Option<MapPolygon> {
         boundary: points(&p.boundary),
         holes: p.holes.iter().map(|r| points(&r.points)).collect(),
         convex_pieces: p.convex_pieces.iter().map(|r| points(&r.points)).collect(),
-        inset: points(&p.inset),
+        insets: p
+            .insets
+            .iter()
+            .map(|r| Region {
+                boundary: points(&r.boundary),
+                holes: r.holes.iter().map(|h| points(&h.points)).collect(),
+            })
+            .collect(),
         observations: p.observations,
         step: (p.step >= 0).then_some(p.step as u32),
     })
@@ -100,6 +115,9 @@ pub fn frame_polygons(stamp_ns: StampNs, frame_id: &str, polygons: &[crate::extr
 /// What one frame changed, as polygons whole.
 pub struct MapDelta<'a> {
     pub stamp_ns: StampNs,
+    pub epoch: u64,
+    pub from_version: u64,
+    pub version: u64,
     pub added: &'a [MapPolygon],
     pub changed: &'a [MapPolygon],
     pub removed: &'a [u64],
@@ -110,6 +128,9 @@ pub struct MapDelta<'a> {
 pub fn map_update(d: &MapDelta, frame_id: &str) -> MapUpdate {
     MapUpdate {
         header: header(d.stamp_ns, frame_id),
+        epoch: d.epoch,
+        from_version: d.from_version,
+        version: d.version,
         added: d.added.iter().map(map_polygon).collect(),
         changed: d.changed.iter().map(map_polygon).collect(),
         removed: d.removed.to_vec(),
@@ -118,9 +139,12 @@ pub fn map_update(d: &MapDelta, frame_id: &str) -> MapUpdate {
     }
 }
 
-pub fn map(s: &MapSnapshot, stamp_ns: StampNs) -> Map {
+/// The whole map of mapper run `epoch`, in `frame_id`.
+pub fn map(s: &MapSnapshot, stamp_ns: StampNs, epoch: u64, frame_id: &str) -> Map {
     Map {
-        header: header(stamp_ns, &s.frame),
+        header: header(stamp_ns, frame_id),
+        epoch,
+        version: s.version,
         drift_z: s.drift_z,
         drift_var: s.drift_var,
         polygons: s.polygons.iter().map(map_polygon).collect(),
@@ -130,6 +154,7 @@ pub fn map(s: &MapSnapshot, stamp_ns: StampNs) -> Map {
 /// The map a client received; polygons with a label code it does not know are left out.
 pub fn snapshot_of(m: &Map) -> MapSnapshot {
     MapSnapshot {
+        version: m.version,
         frame: m.header.frame_id.clone(),
         drift_z: m.drift_z,
         drift_var: m.drift_var,
@@ -181,6 +206,7 @@ pub fn status(r: &crate::runtime::status::Report, stamp_ns: StampNs, frame_id: &
 pub const MARKER_LINE_STRIP: i32 = 4;
 pub const MARKER_ADD: i32 = 0;
 pub const MARKER_DELETE: i32 = 2;
+pub const MARKER_DELETEALL: i32 = 3;
 /// The namespace polymap's markers live in.
 pub const MARKER_NS: &str = "polymap";
 
@@ -229,8 +255,28 @@ pub fn markers(header: &Header, polygons: &[&msg::Polygon], removed: &[u64]) -> 
     MarkerArray { markers }
 }
 
-pub fn update_markers(u: &MapUpdate) -> MarkerArray {
-    markers(&u.header, &u.added.iter().chain(&u.changed).collect::<Vec<_>>(), &u.removed)
+/// The whole map's markers: a DELETEALL (so a viewer keeps nothing of an older map), then
+/// every polygon's outline.
+pub fn whole_map_markers(m: &Map) -> MarkerArray {
+    let mut all = markers(&m.header, &m.polygons.iter().collect::<Vec<_>>(), &[]);
+    all.markers.insert(0, marker(&m.header, 0, MARKER_DELETEALL));
+    all
+}
+
+/// The drift as a transform: `odometry_frame` (VINS's) seen from `map_frame`, which is
+/// VINS's frame with the drift taken out, so a point p in VINS's frame is p - (0, 0, drift_z)
+/// in the map frame.
+pub fn drift_transform(stamp_ns: StampNs, map_frame: &str, odometry_frame: &str, drift_z: f64) -> TfMessage {
+    TfMessage {
+        transforms: vec![TransformStamped {
+            header: header(stamp_ns, map_frame),
+            child_frame_id: odometry_frame.into(),
+            transform: Transform {
+                translation: Vector3 { x: 0.0, y: 0.0, z: -drift_z },
+                rotation: Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 },
+            },
+        }],
+    }
 }
 
 // The D435i, as realsense-ros publishes it.

@@ -4,10 +4,13 @@
 //! all take names from here.
 
 pub mod convert;
+pub mod follower;
+pub mod terrain;
 
 use crate::config::{Config, OdometryType};
 use crate::ros2::msg::{
-    CameraInfo, FramePolygons, GetFoothold, GetMap, Image, Imu, MapUpdate, MarkerArray, Odometry, PoseStamped, Status,
+    CameraInfo, FramePolygons, GetFoothold, GetMap, Image, Imu, Map, MapUpdate, MarkerArray, Odometry, PlanarTerrain,
+    PoseStamped, Status, TfMessage,
 };
 use crate::ros2::{Qos, RosName, Service, Topic};
 
@@ -30,10 +33,18 @@ pub enum OdometryTopic {
 pub struct Interface {
     /// `<namespace>/frame_polygons`: each frame's polygons.
     pub frame_polygons: Topic<FramePolygons>,
-    /// `<namespace>/map_updates`: what each frame changed in the map; none may be lost.
+    /// `<namespace>/map_updates`: what each frame changed in the map, versioned; none may be
+    /// lost (reliable, keep all: the publisher waits rather than drop one).
     pub map_updates: Topic<MapUpdate>,
-    /// `<namespace>/markers`: the map's outlines for RViz.
+    /// `<namespace>/map`: the whole map when it changed, at most every
+    /// `ros2.whole_map_period_s`; transient local, so a late subscriber gets it at once.
+    pub map: Topic<Map>,
+    /// `<namespace>/markers`: the whole map's outlines for RViz, as `map` (transient local).
     pub markers: Topic<MarkerArray>,
+    /// `/tf` (`ros2.tf_topic`): the drift, as the transform from the map frame to VINS's.
+    pub tf: Topic<TfMessage>,
+    /// `planar_terrain.topic`: the map as convex_plane_decomposition_msgs/PlanarTerrain.
+    pub planar_terrain: Topic<PlanarTerrain>,
     /// `<namespace>/status`: health, once a second.
     pub status: Topic<Status>,
     /// `<namespace>/get_map`: the whole map.
@@ -61,7 +72,13 @@ impl Interface {
         Interface {
             frame_polygons: Topic::new(own("frame_polygons"), Qos::reliable(10)),
             map_updates: Topic::new(own("map_updates"), Qos::every_sample()),
-            markers: Topic::new(own("markers"), Qos::reliable(10)),
+            map: Topic::new(own("map"), Qos::latched(1)),
+            markers: Topic::new(own("markers"), Qos::latched(1)),
+            // tf2's listeners subscribe reliable, volatile, keep last 100.
+            tf: Topic::new(config.ros2.tf_topic.clone(), Qos::reliable(100)),
+            // Its consumers subscribe reliable, keep last 1; transient local serves them and
+            // a late one at once.
+            planar_terrain: Topic::new(config.planar_terrain.topic.clone(), Qos::latched(1)),
             status: Topic::new(own("status"), Qos::reliable(10)),
             get_map: Service::new(own("get_map")),
             get_foothold: Service::new(own("get_foothold")),

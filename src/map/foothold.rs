@@ -1,42 +1,61 @@
-//! Footholds: the convex piece of the map under a point, as a footstep planner asks for it.
+//! Footholds: a convex region of the map where a foot fits around a point, as a footstep
+//! planner asks for it. Only insets count (the polygons shrunk by the foot margin, holes
+//! grown by it), so a foot placed anywhere in the answer stays on the surface.
 
-use super::{MapPolygon, MapSnapshot};
+use geo::{Coord, Distance, Euclidean, LineString, Point, Polygon as Shape};
 
-/// A convex piece found for a point.
-#[derive(Clone, Copy, Debug)]
+use super::{MapPolygon, MapSnapshot, Region};
+
+/// A foothold found for a point.
+#[derive(Clone, Debug)]
 pub struct Found<'a> {
     pub polygon: &'a MapPolygon,
-    pub piece: &'a [[f64; 3]],
-    /// Horizontal distance from the point to the piece, m (0 when it contains it).
+    /// The convex region, on the polygon's plane (counter-clockwise from above).
+    pub piece: Vec<[f64; 3]>,
+    /// Horizontal distance from the point to the inset it was grown in, m (0 inside).
     pub distance: f64,
 }
 
-/// What a foothold query finds: a piece, or nothing within reach.
+/// What a foothold query finds: a region, or nothing within reach.
 pub type Foothold<'a> = Option<Found<'a>>;
 
 /// Surfaces further than this above or below the point are not its footholds, m.
 pub const MAX_HEIGHT_DIFFERENCE_M: f64 = 0.3;
 
-/// The convex piece under `p` (seen from above, on a horizontal surface within
-/// [`MAX_HEIGHT_DIFFERENCE_M`] of its height), or failing that the nearest such piece.
+/// The largest convex region around `p` (seen from above) inside the inset under it, on a
+/// horizontal surface within [`MAX_HEIGHT_DIFFERENCE_M`] of its height; failing that, around
+/// the nearest point of the nearest such inset.
 pub fn foothold(s: &MapSnapshot, p: [f64; 3]) -> Foothold<'_> {
-    let mut best: Option<(f64, f64, Found)> = None;
+    let at = Coord { x: p[0], y: p[1] };
+    let mut best: Option<(f64, f64, &MapPolygon, Shape<f64>)> = None;
     for poly in s.polygons.iter().filter(|q| q.label.is_horizontal() && q.normal[2].abs() > 1e-3) {
-        let z = -(poly.normal[0] * p[0] + poly.normal[1] * p[1] + poly.offset) / poly.normal[2];
-        let dz = (z - p[2]).abs();
+        let dz = (height_at(poly, at) - p[2]).abs();
         if dz > MAX_HEIGHT_DIFFERENCE_M {
             continue;
         }
-        for piece in &poly.convex_pieces {
-            let d = distance_xy(piece, [p[0], p[1]]);
-            let better =
-                best.as_ref().is_none_or(|&(bd, bdz, _)| (d, dz) < (bd, bdz) && (d < bd || (d == 0.0 && dz < bdz)));
-            if better {
-                best = Some((d, dz, Found { polygon: poly, piece, distance: d }));
+        for inset in &poly.insets {
+            let shape = top_down(inset);
+            let d = Euclidean.distance(&Point(at), &shape);
+            if best.as_ref().is_none_or(|&(bd, bdz, _, _)| d < bd || (d == bd && dz < bdz)) {
+                best = Some((d, dz, poly, shape));
             }
         }
     }
-    best.map(|(_, _, f)| f)
+    let (distance, _, polygon, shape) = best?;
+    let region = super::convex::convex_region_around(&shape, at)?;
+    let piece = region.into_iter().map(|c| [c.x, c.y, height_at(polygon, c)]).collect();
+    Some(Found { polygon, piece, distance })
+}
+
+/// The height of a polygon's plane at `c`, seen from above.
+fn height_at(poly: &MapPolygon, c: Coord<f64>) -> f64 {
+    -(poly.normal[0] * c.x + poly.normal[1] * c.y + poly.offset) / poly.normal[2]
+}
+
+/// A region seen from above, as a 2-D shape in world x, y.
+fn top_down(r: &Region) -> Shape<f64> {
+    let ring = |pts: &[[f64; 3]]| LineString::from(pts.iter().map(|p| Coord { x: p[0], y: p[1] }).collect::<Vec<_>>());
+    Shape::new(ring(&r.boundary), r.holes.iter().map(|h| ring(h)).collect())
 }
 
 /// Horizontal distance from `q` to a convex ring (0 inside).

@@ -156,7 +156,29 @@ const SLIVER_HOLE_M: f64 = 0.005;
 /// The largest part of a union or buffer, without sliver holes (parts and holes from
 /// round-off are dropped).
 pub fn largest(mp: MultiPolygon<f64>) -> Option<Shape<f64>> {
-    let s = mp.0.into_iter().max_by(|a, b| a.unsigned_area().total_cmp(&b.unsigned_area()))?;
+    mp.0.into_iter().max_by(|a, b| a.unsigned_area().total_cmp(&b.unsigned_area())).map(without_sliver_holes)
+}
+
+/// Pieces of an inset smaller than this are crumbs of the offset, not places for a foot, m^2.
+const INSET_CRUMB_M2: f64 = 1e-4;
+
+/// `shape` shrunk by `margin` (its holes grown by it): every piece that is left, each with
+/// its holes; the shape itself for no margin.
+pub fn inset(shape: &Shape<f64>, margin: f64) -> Vec<Shape<f64>> {
+    if margin <= 0.0 {
+        return vec![shape.clone()];
+    }
+    use geo::Buffer;
+    shape
+        .buffer(-margin)
+        .0
+        .into_iter()
+        .filter(|piece| piece.unsigned_area() >= INSET_CRUMB_M2)
+        .map(without_sliver_holes)
+        .collect()
+}
+
+fn without_sliver_holes(s: Shape<f64>) -> Shape<f64> {
     let (outline, holes) = s.into_inner();
     let is_gap = |h: &LineString<f64>| {
         let area = ring_area(h);
@@ -164,7 +186,7 @@ pub fn largest(mp: MultiPolygon<f64>) -> Option<Shape<f64>> {
         // A thin hole's width is about twice its area over its perimeter.
         area >= SLIVER_HOLE_M2 && 2.0 * area >= SLIVER_HOLE_M * perimeter
     };
-    Some(Shape::new(outline, holes.into_iter().filter(is_gap).collect()))
+    Shape::new(outline, holes.into_iter().filter(is_gap).collect())
 }
 
 /// A ring of 3-D points on or near `frame`'s plane in 2-D, each vertex moved `d[i]` into

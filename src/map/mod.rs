@@ -10,6 +10,7 @@
 
 pub mod convex;
 pub mod drift;
+pub mod elevation;
 pub mod foothold;
 pub mod geometry;
 pub mod labels;
@@ -43,19 +44,32 @@ pub struct MapPolygon {
     pub centroid: [f64; 3],
     pub boundary: Vec<[f64; 3]>,
     pub holes: Vec<Vec<[f64; 3]>>,
-    /// Convex pieces whose union is the polygon.
+    /// Convex pieces whose union is the insets: where a foot fits whole.
     pub convex_pieces: Vec<Vec<[f64; 3]>>,
-    /// The outline shrunk by the foot margin (empty when nothing is left).
-    pub inset: Vec<[f64; 3]>,
+    /// The polygon shrunk by the foot margin: every piece that is left, each with its holes
+    /// (grown by the margin); empty when nothing is left.
+    #[serde(default)]
+    pub insets: Vec<Region>,
     /// Frames that saw it.
     pub observations: u32,
     /// Step index for treads, landings and risers; 0 for the floor.
     pub step: Option<u32>,
 }
 
+/// A polygon with holes on a map polygon's plane (world frame, metres): outline
+/// counter-clockwise seen from above the plane, holes clockwise, no closing repeat.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Region {
+    pub boundary: Vec<[f64; 3]>,
+    pub holes: Vec<Vec<[f64; 3]>>,
+}
+
 /// The whole map as saved and published.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MapSnapshot {
+    /// The map's version: one more with every frame merged (see [`PolygonMap::version`]).
+    #[serde(default)]
+    pub version: u64,
     /// Always "world".
     pub frame: String,
     /// Estimated vertical drift of the odometry, m.
@@ -166,6 +180,8 @@ pub struct PolygonMap {
     entries: BTreeMap<u64, Entry>,
     next_id: u64,
     pub drift: DriftFilter,
+    /// One more with every frame merged: what a client applied up to.
+    version: u64,
     stair: Option<Stair>,
     pub counters: MapCounters,
 }
@@ -190,6 +206,7 @@ impl PolygonMap {
             entries: BTreeMap::new(),
             next_id: 1,
             drift: DriftFilter::new(cfg.drift_sigma_p, cfg.drift_sigma_m),
+            version: 0,
             stair: None,
             counters: MapCounters::default(),
         }
@@ -201,6 +218,13 @@ impl PolygonMap {
 
     pub fn is_empty(&self) -> bool {
         self.entries.is_empty()
+    }
+
+    /// The map's version: one more with every frame merged (a frame whose pose is refused
+    /// changes nothing and leaves it). Updates carry the version they apply to and the one
+    /// they make, snapshots theirs, so a client can tell what it missed.
+    pub fn version(&self) -> u64 {
+        self.version
     }
 
     pub fn stair(&self) -> Option<&Stair> {
@@ -251,6 +275,7 @@ impl PolygonMap {
         if !pose_finite {
             return update;
         }
+        self.version += 1;
 
         // Drift: predict, measure on the horizontal matches, correct.
         if self.cfg.drift_filter {
@@ -552,6 +577,7 @@ impl PolygonMap {
     pub fn snapshot(&mut self) -> MapSnapshot {
         let polygons = self.ids().into_iter().filter_map(|id| self.polygon(id)).collect();
         MapSnapshot {
+            version: self.version,
             frame: "world".into(),
             drift_z: self.drift.z,
             drift_var: self.drift.var,
@@ -612,6 +638,7 @@ impl PolygonMap {
             e.seen = Some(e.shape.clone());
         }
         map.next_id = s.polygons.iter().map(|p| p.id + 1).max().unwrap_or(1);
+        map.version = s.version;
         map.relabel();
         Ok(map)
     }
@@ -825,15 +852,15 @@ fn stands_on(e: &Entry, t_world_camera: &Isometry3<f64>, measured: &Point3<f64>)
 /// The planner's view of an entry.
 fn publish(id: u64, e: &Entry, foot_margin: f64) -> MapPolygon {
     let lift_ring = |r: &geo::LineString<f64>| e.frame.lift_ring(r, &e.plane);
-    let convex_pieces = convex::convex_pieces(&e.shape)
-        .into_iter()
+    let inset_shapes = geometry::inset(&e.shape, foot_margin);
+    let convex_pieces = inset_shapes
+        .iter()
+        .flat_map(convex::convex_pieces)
         .map(|ring| ring.into_iter().map(|c| e.frame.lift(c, &e.plane)).collect())
         .collect();
-    let inset = if foot_margin > 0.0 {
-        use geo::Buffer;
-        geometry::largest(e.shape.buffer(-foot_margin)).map_or(Vec::new(), |s| lift_ring(s.exterior()))
-    } else {
-        lift_ring(e.shape.exterior())
+    let region = |s: &Shape<f64>| Region {
+        boundary: lift_ring(s.exterior()),
+        holes: s.interiors().iter().map(lift_ring).collect(),
     };
     let n = e.plane.normal;
     MapPolygon {
@@ -847,7 +874,7 @@ fn publish(id: u64, e: &Entry, foot_margin: f64) -> MapPolygon {
         boundary: lift_ring(e.shape.exterior()),
         holes: e.shape.interiors().iter().map(lift_ring).collect(),
         convex_pieces,
-        inset,
+        insets: inset_shapes.iter().map(region).collect(),
         observations: e.observations,
         step: e.step,
     }

@@ -16,7 +16,7 @@ pub fn label_colour(label: Label, step: Option<u32>) -> Rgb<u8> {
     match label {
         Label::Floor => Rgb([130, 130, 130]),
         // Neighbouring treads alternate shades so that each one's outline reads.
-        Label::Tread if step.unwrap_or(0) % 2 == 0 => Rgb([70, 130, 230]),
+        Label::Tread if step.unwrap_or(0).is_multiple_of(2) => Rgb([70, 130, 230]),
         Label::Tread => Rgb([40, 90, 180]),
         Label::Landing => Rgb([46, 180, 100]),
         Label::Riser => Rgb([220, 80, 60]),
@@ -58,13 +58,15 @@ pub fn top_down(map: &MapSnapshot, truth: Option<&Truth>) -> RgbImage {
             }
         }
     }
-    let ring_px = |r: &[[f64; 3]]| r.iter().map(|p| to_px(p)).map(|[x, y]| (x as f32, y as f32)).collect::<Vec<_>>();
+    let ring_px = |r: &[[f64; 3]]| r.iter().map(&to_px).map(|[x, y]| (x as f32, y as f32)).collect::<Vec<_>>();
     for p in &order {
         for r in std::iter::once(&p.boundary).chain(&p.holes) {
             draw_ring(&mut img, &ring_px(r), Rgb([0, 0, 0]));
         }
-        if !p.inset.is_empty() {
-            draw_ring(&mut img, &ring_px(&p.inset), Rgb([235, 235, 235]));
+        for inset in &p.insets {
+            for r in std::iter::once(&inset.boundary).chain(&inset.holes) {
+                draw_ring(&mut img, &ring_px(r), Rgb([235, 235, 235]));
+            }
         }
     }
     for r in truth_rings {

@@ -2,7 +2,8 @@
 //!
 //! ```text
 //! depth source ─► newest-frame slot ─► extractor thread (extract, pose at the frame's stamp,
-//!   map update) ─► FrameEvent ─► publisher ─► frame_polygons, map_updates, markers
+//!   map update) ─► FrameEvent ─► publisher ─► frame_polygons, map_updates (versioned), /tf
+//! map changed, at most every period ─► map and markers (transient local), planar_terrain
 //! odometry subscription ─► pose buffer      services: get_map, get_foothold      status: 1 Hz
 //! D435i (mock or real) ─► infra1, infra2, imu for VINS
 //! ```
@@ -69,8 +70,12 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
     let worker = worker::spawn(config, shared, events_tx)?;
     let camera = sources::start_depth(config, seq.as_ref(), slot, stop.clone(), counters.clone()).await?;
     let d435i = sources::start_d435i(config, seq.as_ref(), node.clone(), &interface, stop.clone()).await?;
-    let _services = services::serve(&node, &interface, map.clone(), counters.clone()).await?;
-    let publishers = publish::Publishers::new(&node, &interface).await?;
+    // This run's epoch: versions count from the snapshot's within it, and a client seeing a
+    // new one knows the mapper restarted.
+    let epoch = now_ns();
+    let map_frame = &config.ros2.map_frame;
+    let _services = services::serve(&node, &interface, map.clone(), counters.clone(), epoch, map_frame).await?;
+    let mut publishers = publish::Publishers::new(&node, &interface, config, epoch).await?;
     tracing::info!(
         "polymap {} on ROS 2 ({:?}, domain {})",
         config.ros2.namespace,
@@ -81,6 +86,10 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
     let mut latencies: Vec<f64> = Vec::new();
     let mut all_latencies: Vec<f64> = Vec::new();
     let mut status_tick = tokio::time::interval(Duration::from_secs(1));
+    let mut whole_map_tick = tokio::time::interval(Duration::from_secs_f64(config.ros2.whole_map_period_s));
+    let mut terrain_tick = tokio::time::interval(Duration::from_secs_f64(config.planar_terrain.period_s));
+    // Where the robot was at the last frame mapped (map frame): the terrain grid's centre.
+    let mut robot: Option<[f64; 3]> = None;
     let mut snapshot_tick = tokio::time::interval(Duration::from_secs_f64(config.map.snapshot_period_s));
     snapshot_tick.tick().await;
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
@@ -107,6 +116,7 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
                     if let Err(err) = publishers.frame(&e).await {
                         tracing::warn!("publishing frame {}: {err}", e.stamp_ns);
                     }
+                    robot = Some(e.robot);
                     latencies.push(now_ns().saturating_sub(e.stamp_ns) as f64 * 1e-6);
                 }
                 None => break true,
@@ -117,6 +127,16 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
                 tracing::info!("{r}");
                 if let Err(e) = publishers.status(&r).await {
                     tracing::warn!("publishing the status: {e}");
+                }
+            }
+            _ = whole_map_tick.tick() => {
+                if let Err(e) = publishers.whole_map(&map).await {
+                    tracing::warn!("publishing the whole map: {e}");
+                }
+            }
+            _ = terrain_tick.tick(), if robot.is_some() => {
+                if let Err(e) = publishers.terrain(&map, robot.unwrap_or_default()).await {
+                    tracing::warn!("publishing the planar terrain: {e}");
                 }
             }
             _ = snapshot_tick.tick() => {

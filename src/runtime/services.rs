@@ -13,15 +13,15 @@ use crate::map::PolygonMap;
 use crate::ros2::msg::{GetFootholdResponse, GetMapResponse};
 use crate::ros2::{Node, Ros2Error, ServiceServer};
 
-/// The frame polymap's map is in.
-pub const MAP_FRAME: &str = "world";
-
-/// Serves `get_map` and `get_foothold` until the servers are dropped.
+/// Serves `get_map` and `get_foothold` until the servers are dropped. The map is taken
+/// whole under its lock when the request comes, so its version is what it holds.
 pub async fn serve(
     node: &Node,
     interface: &Interface,
     map: Arc<Mutex<PolygonMap>>,
     counters: Arc<Counters>,
+    epoch: u64,
+    map_frame: &str,
 ) -> Result<[ServiceServer; 2], Ros2Error> {
     let refused = |counters: &Counters, service: &str, why: &dyn std::fmt::Display| {
         let n = counters.requests_refused.fetch_add(1, Ordering::Relaxed) + 1;
@@ -32,10 +32,11 @@ pub async fn serve(
     };
     let get_map = {
         let (map, counters, name) = (map.clone(), counters.clone(), interface.get_map.name.to_string());
+        let frame = map_frame.to_string();
         node.serve(&interface.get_map, move |request| match request {
             Ok(_) => {
                 let snapshot = map.lock().snapshot();
-                Ok(GetMapResponse { map: convert::map(&snapshot, now_ns()) })
+                Ok(GetMapResponse { map: convert::map(&snapshot, now_ns(), epoch, &frame) })
             }
             Err(e) => Err(refused(&counters, &name, &e)),
         })
@@ -43,6 +44,7 @@ pub async fn serve(
     };
     let get_foothold = {
         let name = interface.get_foothold.name.to_string();
+        let frame = map_frame.to_string();
         node.serve(&interface.get_foothold, move |request| {
             let point = match request {
                 Ok(r) => r.point,
@@ -54,7 +56,7 @@ pub async fn serve(
             }
             let snapshot = map.lock().snapshot();
             let found = crate::map::foothold::foothold(&snapshot, p);
-            Ok(GetFootholdResponse { foothold: convert::foothold(&found, now_ns(), MAP_FRAME) })
+            Ok(GetFootholdResponse { foothold: convert::foothold(&found, now_ns(), &frame) })
         })
         .await?
     };

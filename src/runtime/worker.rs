@@ -27,6 +27,11 @@ use crate::types::StampNs;
 /// What one frame made: its polygons in the map's frame, and what it changed in the map.
 pub struct FrameEvent {
     pub stamp_ns: StampNs,
+    /// The map's version before and after this frame.
+    pub from_version: u64,
+    pub version: u64,
+    /// Where the robot (the odometry's body) was, in the map's frame.
+    pub robot: [f64; 3],
     pub polygons: Vec<Polygon>,
     pub added: Vec<MapPolygon>,
     pub changed: Vec<MapPolygon>,
@@ -94,11 +99,17 @@ pub fn spawn(
             let t_world_camera = world_body * body_camera;
             let mut m = map.lock();
             let updated = std::panic::catch_unwind(AssertUnwindSafe(|| {
+                let from_version = m.version();
                 let update = m.update(&polys.polygons, &t_world_camera, &intrinsics, Some(&stages.depth));
                 let corrected = m.corrected(&t_world_camera);
+                let robot = m.corrected(&world_body).translation.vector;
+                let version = m.version();
                 let mut polygons_of = |ids: &[u64]| ids.iter().filter_map(|&id| m.polygon(id)).collect::<Vec<_>>();
                 FrameEvent {
                     stamp_ns: frame.stamp_ns,
+                    from_version,
+                    version,
+                    robot: [robot.x, robot.y, robot.z],
                     polygons: polys.polygons.iter().map(|p| p.transformed(&corrected)).collect(),
                     added: polygons_of(&update.added),
                     changed: polygons_of(&update.changed),

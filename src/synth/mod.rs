@@ -115,7 +115,7 @@ impl SynthOptions {
 
     /// Why these options cannot make a sequence, if they cannot.
     pub fn problem(&self) -> Option<String> {
-        if self.width < 32 || self.width > 4096 || self.width % 4 != 0 {
+        if self.width < 32 || self.width > 4096 || !self.width.is_multiple_of(4) {
             return Some(format!("--width {} must be a multiple of 4 within 32..=4096", self.width));
         }
         if self.frames == 0 || self.frames > 100_000 {

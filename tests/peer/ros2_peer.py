@@ -8,7 +8,9 @@ running polymap (mock camera, mock D435i, no VINS) it:
 - subscribes to polymap's topics and the D435i's, as rmw_zenoh declares subscriptions, and
   checks every sample's attachment;
 - reads the ROS graph from the liveliness tokens;
-- calls get_map and get_foothold.
+- calls get_map and get_foothold;
+- reads the planar terrain with convex_plane_decomposition_msgs and grid_map_msgs as their
+  ROS 2 .msg files define them (below, registered with rosbags).
 
 Prints one JSON object with what it saw.
 """
@@ -23,6 +25,23 @@ import time
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "examples" / "python"))
 
 from rmw_zenoh import Peer  # noqa: E402
+from rosbags.typesys import get_types_from_msg  # noqa: E402
+
+# The packages' ROS 2 message definitions (grid_map jazzy; leggedrobotics' plane_segmentation
+# for ROS 2), as their .msg files write them.
+TERRAIN_MSGS = {
+    "grid_map_msgs/msg/GridMapInfo": "float64 resolution\nfloat64 length_x\nfloat64 length_y\ngeometry_msgs/Pose pose\n",
+    "grid_map_msgs/msg/GridMap": "std_msgs/Header header\nGridMapInfo info\nstring[] layers\nstring[] basic_layers\n"
+                                 "std_msgs/Float32MultiArray[] data\nuint16 outer_start_index\nuint16 inner_start_index\n",
+    "convex_plane_decomposition_msgs/msg/Point2d": "float32 x\nfloat32 y\n",
+    "convex_plane_decomposition_msgs/msg/Polygon2d": "Point2d[] points\n",
+    "convex_plane_decomposition_msgs/msg/PolygonWithHoles2d": "Polygon2d outer_boundary\nPolygon2d[] holes\n",
+    "convex_plane_decomposition_msgs/msg/BoundingBox2d": "float32 min_x\nfloat32 min_y\nfloat32 max_x\nfloat32 max_y\n",
+    "convex_plane_decomposition_msgs/msg/PlanarRegion": "geometry_msgs/Pose plane_parameters\nBoundingBox2d bbox2d\n"
+                                                        "PolygonWithHoles2d boundary\nPolygonWithHoles2d[] insets\n",
+    "convex_plane_decomposition_msgs/msg/PlanarTerrain": "PlanarRegion[] planar_regions\ngrid_map_msgs/GridMap gridmap\n",
+}
+TERRAIN = "/convex_plane_decomposition_ros/planar_terrain"
 
 NS = "/polymap/leju"
 TOPICS = {
@@ -30,6 +49,9 @@ TOPICS = {
     f"{NS}/map_updates": "polymap_msgs/msg/MapUpdate",
     f"{NS}/markers": "visualization_msgs/msg/MarkerArray",
     f"{NS}/status": "polymap_msgs/msg/Status",
+    f"{NS}/map": "polymap_msgs/msg/Map",
+    "/tf": "tf2_msgs/msg/TFMessage",
+    TERRAIN: "convex_plane_decomposition_msgs/msg/PlanarTerrain",
     "/camera/camera/infra1/image_rect_raw": "sensor_msgs/msg/Image",
     "/camera/camera/infra1/camera_info": "sensor_msgs/msg/CameraInfo",
     "/camera/camera/imu": "sensor_msgs/msg/Imu",
@@ -82,7 +104,36 @@ def main():
         run(peer, args)
 
 
+def terrain_summary(t):
+    """What the planar terrain holds, as a planner reading it would check it."""
+    g = t.gridmap
+    layers = list(g.layers)
+    rows, cols = round(g.info.length_x / g.info.resolution), round(g.info.length_y / g.info.resolution)
+    elevation = g.data[layers.index("elevation")]
+    finite = [float(v) for v in elevation.data if v == v]
+
+    def signed_area(poly):
+        p = poly.points
+        return sum(p[i].x * p[(i + 1) % len(p)].y - p[(i + 1) % len(p)].x * p[i].y for i in range(len(p))) / 2
+
+    return {
+        "frame_id": g.header.frame_id, "layers": layers, "rows": rows, "cols": cols,
+        "dims": [[d.label, int(d.size), int(d.stride)] for d in elevation.layout.dim],
+        "data_lengths": [len(d.data) for d in g.data], "finite_cells": len(finite),
+        "elevation_range": [min(finite), max(finite)] if finite else None,
+        "regions": len(t.planar_regions),
+        "regions_with_insets": sum(1 for r in t.planar_regions if len(r.insets) > 0),
+        "outlines_ccw": all(signed_area(r.boundary.outer_boundary) > 0 for r in t.planar_regions),
+        "holes_cw": all(signed_area(h) < 0 for r in t.planar_regions for h in r.boundary.holes),
+        "unit_quaternions": all(abs(sum(v * v for v in (r.plane_parameters.orientation.x, r.plane_parameters.orientation.y,
+                                                        r.plane_parameters.orientation.z, r.plane_parameters.orientation.w)) - 1) < 1e-6
+                                for r in t.planar_regions),
+    }
+
+
 def run(peer, args):
+    for name, text in TERRAIN_MSGS.items():
+        peer.store.register(get_types_from_msg(text, name))
     streams = {name: Stream() for name in TOPICS}
     lock = threading.Lock()
 
@@ -154,6 +205,11 @@ def run(peer, args):
             "streams": {n: {"count": s.count, "bad_attachments": s.bad_attachments, "gaps": s.gaps} for n, s in streams.items()},
             "keys": {n: peer.key(n, t) for n, t in TOPICS.items()},
             "hashes": {t: peer.type_hash(t) for t in sorted(set(TOPICS.values()) | {"nav_msgs/msg/Odometry", "polymap_msgs/srv/GetMap", "polymap_msgs/srv/GetFoothold"})},
+            "terrain": None if streams[TERRAIN].last is None else terrain_summary(streams[TERRAIN].last),
+            "tf_last": None if streams["/tf"].last is None else {
+                "parent": streams["/tf"].last.transforms[0].header.frame_id,
+                "child": streams["/tf"].last.transforms[0].child_frame_id,
+                "z": streams["/tf"].last.transforms[0].transform.translation.z},
             "graph": graph,
             "status_early": None if status_at_2s is None else {"processed": int(status_at_2s.frames_processed), "without_pose": int(status_at_2s.frames_without_pose)},
             "status_last": None if status is None else {"processed": int(status.frames_processed), "without_pose": int(status.frames_without_pose), "poses_accepted": int(status.poses_accepted), "poses_refused": int(status.poses_refused)},

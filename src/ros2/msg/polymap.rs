@@ -12,6 +12,15 @@ ros_message! {
         pub points: Vec<Point>,
     }
 
+    /// polymap_msgs/Region: a polygon with holes on a map polygon's plane.
+    #[derive(Default)]
+    pub struct Region = "polymap_msgs/msg/Region" {
+        /// Counter-clockwise seen from above the plane.
+        pub boundary: Vec<Point>,
+        /// Clockwise.
+        pub holes: Vec<Ring>,
+    }
+
     /// polymap_msgs/Polygon: a planar polygon, `normal . p + offset = 0`, in the frame of the
     /// message that carries it.
     #[derive(Default)]
@@ -28,10 +37,10 @@ ros_message! {
         pub centroid: Point,
         pub boundary: Vec<Point>,
         pub holes: Vec<Ring>,
-        /// Convex pieces whose union is the polygon.
+        /// Convex pieces whose union is the insets.
         pub convex_pieces: Vec<Ring>,
-        /// The outline shrunk by the foot margin.
-        pub inset: Vec<Point>,
+        /// The polygon shrunk by the foot margin: every piece left, with its holes.
+        pub insets: Vec<Region>,
         pub observations: u32,
     }
 
@@ -46,6 +55,11 @@ ros_message! {
     #[derive(Default)]
     pub struct MapUpdate = "polymap_msgs/msg/MapUpdate" {
         pub header: Header,
+        /// The mapper's run (its start, ns); versions count within it.
+        pub epoch: u64,
+        /// The map version this update applies to, and the one it makes.
+        pub from_version: u64,
+        pub version: u64,
         pub added: Vec<Polygon>,
         pub changed: Vec<Polygon>,
         pub removed: Vec<u64>,
@@ -58,24 +72,26 @@ ros_message! {
     #[derive(Default)]
     pub struct Map = "polymap_msgs/msg/Map" {
         pub header: Header,
+        pub epoch: u64,
+        pub version: u64,
         pub drift_z: f64,
         pub drift_var: f64,
         pub polygons: Vec<Polygon>,
     }
 
-    /// polymap_msgs/Foothold: the convex piece under a point, or the nearest.
+    /// polymap_msgs/Foothold: a convex region where a foot fits around a point, or the nearest.
     #[derive(Default)]
     pub struct Foothold = "polymap_msgs/msg/Foothold" {
         pub header: Header,
         pub found: bool,
-        /// The piece contains the point, seen from above, rather than being the nearest.
+        /// The point lies in the inset the piece was grown in, seen from above.
         pub contains: bool,
         pub polygon_id: u64,
         pub label: u8,
         pub normal: [f64; 3],
         pub offset: f64,
         pub piece: Vec<Point>,
-        /// Horizontal distance from the point to the piece, m (0 when it contains it).
+        /// Horizontal distance from the point to that inset, m (0 when it lies in it).
         pub distance: f64,
     }
 

@@ -1,0 +1,166 @@
+//! What the end-to-end tests share: paths, loopback configs, and a planner that follows the
+//! map as polymap::interface::follower says.
+#![allow(dead_code)] // each test binary uses its own part
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command};
+use std::sync::Arc;
+use std::time::Duration;
+
+use polymap::config::Config;
+use polymap::interface::Interface;
+use polymap::interface::follower::{FollowerCounters, MapFollower};
+use polymap::ros2::msg::{GetMap, GetMapRequest, Map, MapUpdate, Polygon};
+use polymap::ros2::session::{loopback, loopback_json5};
+use polymap::ros2::{Client, Node, NodeOptions, RosName};
+
+pub fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+pub fn json5(dir: &Path, name: &str, listen: Option<u16>, connect: &[u16]) -> String {
+    let path = dir.join(format!("{name}.json5"));
+    std::fs::write(&path, loopback_json5(listen, connect)).unwrap();
+    path.display().to_string()
+}
+
+/// A session connected to the mapper's peer on `port` (which may not listen yet), and a node on it.
+pub async fn planner_node(port: u16, name: &str) -> (zenoh::Session, Arc<Node>) {
+    node_on(|| loopback(None, &[port]), name).await
+}
+
+/// A session made with `config` once it reaches another peer or a router, and a node on it.
+pub async fn node_on(config: impl Fn() -> zenoh::Config, name: &str) -> (zenoh::Session, Arc<Node>) {
+    for _ in 0..100 {
+        if let Ok(s) = polymap::ros2::session::open(config()).await
+            && (s.info().peers_zid().await.next().is_some() || s.info().routers_zid().await.next().is_some())
+        {
+            let config = Config::default();
+            let options = NodeOptions { namespace: RosName::root(), name: name.into(), ..config.ros2.node_options() };
+            let node = Arc::new(Node::new(&s, options).await.unwrap());
+            return (s, node);
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    panic!("no Zenoh peer or router answered");
+}
+
+/// What one follower ended with.
+pub struct Followed {
+    pub map: Option<Map>,
+    pub counters: FollowerCounters,
+    /// The same stream applied without versions: every update as it comes, the whole map
+    /// when its answer comes (what a planner did before versions).
+    pub naive: BTreeMap<u64, Polygon>,
+}
+
+/// A planner following the map: subscribe to the updates and the whole map, ask for the
+/// whole map, then apply what comes, asking again whenever the follower says so; `drop_every` updates received, one
+/// is lost. Ends when `stop` says so, once what arrived is applied.
+pub async fn follow(
+    node: Arc<Node>,
+    interface: Interface,
+    drop_every: Option<u64>,
+    mut stop: tokio::sync::watch::Receiver<bool>,
+) -> Followed {
+    let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<MapUpdate>();
+    let _updates = node
+        .subscribe(&interface.map_updates, move |m| {
+            let _ = tx.send(m.expect("map updates decode"));
+        })
+        .await
+        .unwrap();
+    // The whole map, latched and republished each time it changes (at most once a second):
+    // the way back for a follower that lost the last update of a burst and so has no later
+    // one to notice the gap by.
+    let (whole_tx, mut whole_rx) = tokio::sync::mpsc::unbounded_channel::<Map>();
+    let _whole = node
+        .subscribe(&interface.map, move |m| {
+            let _ = whole_tx.send(m.expect("the whole map decodes"));
+        })
+        .await
+        .unwrap();
+    let get_map = node.client(&interface.get_map).await.unwrap();
+    let mut follower = MapFollower::new();
+    let mut naive: BTreeMap<u64, Polygon> = BTreeMap::new();
+    let mut received = 0u64;
+    let mut take = |u: MapUpdate, follower: &mut MapFollower, naive: &mut BTreeMap<u64, Polygon>| {
+        received += 1;
+        if drop_every.is_some_and(|n| received.is_multiple_of(n)) {
+            return;
+        }
+        for id in &u.removed {
+            naive.remove(id);
+        }
+        for p in u.added.iter().chain(&u.changed) {
+            naive.insert(p.id, p.clone());
+        }
+        follower.on_update(u);
+    };
+    loop {
+        if follower.needs_whole_map()
+            && let Ok(r) = get_map.call(&GetMapRequest::default(), Duration::from_secs(5)).await
+        {
+            naive = r.map.polygons.iter().map(|p| (p.id, p.clone())).collect();
+            follower.on_map(r.map);
+        }
+        tokio::select! {
+            u = rx.recv() => match u {
+                Some(u) => take(u, &mut follower, &mut naive),
+                None => break,
+            },
+            m = whole_rx.recv() => if let Some(m) = m {
+                follower.on_map(m);
+            },
+            _ = stop.changed() => break,
+        }
+    }
+    while let Ok(u) = rx.try_recv() {
+        take(u, &mut follower, &mut naive);
+    }
+    while let Ok(m) = whole_rx.try_recv() {
+        follower.on_map(m);
+    }
+    if follower.needs_whole_map()
+        && let Ok(r) = get_map.call(&GetMapRequest::default(), Duration::from_secs(5)).await
+    {
+        follower.on_map(r.map);
+    }
+    Followed { map: follower.map(), counters: follower.counters, naive }
+}
+
+/// `polymap run` on the mock camera replaying `seq` at `fps` (CPU twin), a Zenoh peer
+/// listening on loopback `port`, with `extra` TOML appended to its config and its log in
+/// `dir/mapper.log`; and a config for a mock VINS that connects to it.
+pub fn start_mapper(dir: &Path, seq: &Path, port: u16, fps: u32, extra: &str, seconds: u64) -> (Child, PathBuf) {
+    let mapper_cfg = dir.join("mapper.toml");
+    let toml = format!(
+        "[sources.depth]\nsequence = {:?}\nfps = {fps}\n[pipeline]\nbackend = \"cpu\"\n[zenoh]\nconfig_file = {:?}\n{extra}",
+        seq.display().to_string(),
+        json5(dir, "mapper", Some(port), &[])
+    );
+    std::fs::write(&mapper_cfg, toml).unwrap();
+    let vins_cfg = dir.join("vins.toml");
+    std::fs::write(&vins_cfg, format!("[zenoh]\nconfig_file = {:?}\n", json5(dir, "vins", None, &[port]))).unwrap();
+    let mapper = Command::new(env!("CARGO_BIN_EXE_polymap"))
+        .args(["run", "--duration", &seconds.to_string(), "--config"])
+        .arg(&mapper_cfg)
+        .stderr(std::fs::File::create(dir.join("mapper.log")).unwrap())
+        .spawn()
+        .unwrap();
+    (mapper, vins_cfg)
+}
+
+/// The map once it has stopped changing: asked every 1.5 s until two answers agree.
+pub async fn settled_map(get_map: &Client<GetMap>) -> Map {
+    let mut last_version = None;
+    loop {
+        tokio::time::sleep(Duration::from_millis(1500)).await;
+        let m = get_map.call(&GetMapRequest::default(), Duration::from_secs(5)).await.unwrap().map;
+        if last_version == Some(m.version) {
+            return m;
+        }
+        last_version = Some(m.version);
+    }
+}
