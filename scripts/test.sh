@@ -33,6 +33,9 @@ export POLYMAP_PYTHON="$PWD/$venv/bin/python"
 # librealsense2 for --features realsense: sets PKG_CONFIG_PATH and LD_LIBRARY_PATH.
 source scripts/librealsense.sh "$venv"
 
+# The examples as programs: tests/readme_clients.rs runs the Rust planner client as the
+# README does (`cargo test --all-targets` builds examples only as test harnesses).
+cargo build --locked --examples --features realsense
 # All targets (library, binary, integration tests, examples, each benchmark run once),
 # with the RealSense drivers compiled, linked and tested against recorded bags.
 cargo test --locked --all-targets --features realsense

@@ -36,7 +36,13 @@ fn command(line: &str) -> (Command, bool) {
             c
         }
         ["cargo", "run", "--release", "--example", example, ref rest @ ..] => {
-            let mut c = Command::new(bin_dir.join("examples").join(example));
+            let program = bin_dir.join("examples").join(example);
+            assert!(
+                program.exists(),
+                "{} is not built: `cargo build --examples` first (scripts/test.sh does)",
+                program.display()
+            );
+            let mut c = Command::new(program);
             c.args(rest.iter().skip_while(|w| **w == "--"));
             c
         }
