@@ -7,6 +7,7 @@ use polymap::config::MapConfig;
 use polymap::extract::Polygon;
 use polymap::map::convex::convex_pieces;
 use polymap::map::drift::DriftFilter;
+use polymap::map::geometry::top_down;
 use polymap::map::{Label, MapSnapshot, PolygonMap, persist};
 use polymap::types::Intrinsics;
 use proptest::prelude::*;
@@ -68,12 +69,6 @@ fn overlapping_views_merge_into_their_true_non_convex_union() {
     assert!(p.convex_pieces.len() >= 2, "an L needs at least two convex pieces");
     let pieces: f64 = p.convex_pieces.iter().map(|r| ring_area(r)).sum();
     assert!((pieces - inset).abs() < 1e-9, "convex pieces cover {pieces} m^2 of the inset's {inset}");
-}
-
-/// A map polygon's part seen from above as a 2-D shape.
-fn top_down(boundary: &[[f64; 3]], holes: &[Vec<[f64; 3]>]) -> Shape<f64> {
-    let ring = |r: &[[f64; 3]]| LineString::from(r.iter().map(|p| (p[0], p[1])).collect::<Vec<_>>());
-    Shape::new(ring(boundary), holes.iter().map(|h| ring(h)).collect())
 }
 
 /// Area of `part` outside `whole`, m^2.

@@ -4,23 +4,13 @@
 
 use std::path::Path;
 
-use geo::{Contains, Coord, Distance, Euclidean, LineString, Point, Polygon as Shape};
+use geo::{Contains, Coord, Distance, Euclidean, Point, Polygon as Shape};
 use polymap::config::{Backend, Config};
 use polymap::interface::terrain::{LAYERS, planar_terrain};
 use polymap::map::elevation::GridSpec;
+use polymap::map::geometry::top_down;
 use polymap::map::{Label, MapPolygon, PolygonMap};
 use polymap::sequence::Sequence;
-
-/// The polygon's outline and holes seen from above.
-fn top_down(p: &MapPolygon) -> Shape<f64> {
-    let ring = |r: &[[f64; 3]]| LineString::from(r.iter().map(|v| (v[0], v[1])).collect::<Vec<_>>());
-    Shape::new(ring(&p.boundary), p.holes.iter().map(|h| ring(h)).collect())
-}
-
-/// Its plane's height over (x, y).
-fn height_at(p: &MapPolygon, x: f64, y: f64) -> f64 {
-    -(p.offset + p.normal[0] * x + p.normal[1] * y) / p.normal[2]
-}
 
 #[test]
 fn the_terrain_grid_holds_each_surface_at_its_plane_height_and_nan_off_every_surface() {
@@ -50,8 +40,12 @@ fn the_terrain_grid_holds_each_surface_at_its_plane_height_and_nan_off_every_sur
 
     // The surfaces a foot may stand on; which of them are regions, by map id.
     let min_up = cfg.max_tilt_deg.to_radians().cos();
-    let standable: Vec<(&MapPolygon, Shape<f64>)> =
-        snapshot.polygons.iter().filter(|p| p.normal[2].abs() >= min_up).map(|p| (p, top_down(p))).collect();
+    let standable: Vec<(&MapPolygon, Shape<f64>)> = snapshot
+        .polygons
+        .iter()
+        .filter(|p| p.normal[2].abs() >= min_up)
+        .map(|p| (p, top_down(&p.boundary, &p.holes)))
+        .collect();
     let region_heights: Vec<f64> = terrain.planar_regions.iter().map(|r| r.plane_parameters.position.z).collect();
 
     let (mut on, mut off, mut near_edge) = (0usize, 0usize, 0usize);
@@ -71,7 +65,7 @@ fn the_terrain_grid_holds_each_surface_at_its_plane_height_and_nan_off_every_sur
             let highest = standable
                 .iter()
                 .filter(|(_, s)| s.contains(&Coord { x, y }))
-                .map(|(p, _)| (height_at(p, x, y), *p))
+                .map(|(p, _)| (p.height_at(x, y), *p))
                 .max_by(|a, b| a.0.total_cmp(&b.0));
             match highest {
                 None => {

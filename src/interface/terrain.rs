@@ -7,11 +7,13 @@
 //! `smooth_planar` layers and a `region` layer (the index in `planar_regions` of the region a
 //! cell lies in).
 
+use geo::Coord;
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
 use super::convert::header;
 use crate::config::PlanarTerrainConfig;
 use crate::map::elevation::{self, GridSpec, Surface};
+use crate::map::geometry::signed_area;
 use crate::map::{MapPolygon, MapSnapshot, Region};
 use crate::ros2::msg::{
     BoundingBox2d, Float32MultiArray, GridMap, GridMapInfo, MultiArrayDimension, MultiArrayLayout, PlanarRegion,
@@ -115,15 +117,15 @@ fn planar_region(p: &MapPolygon) -> PlanarRegion {
     let (origin, axes) = plane_frame(p);
     let to_plane = |v: &[f64; 3]| {
         let d = Vector3::from(*v) - origin;
-        [d.dot(&axes.column(0)), d.dot(&axes.column(1))]
+        Coord { x: d.dot(&axes.column(0)), y: d.dot(&axes.column(1)) }
     };
     // Outlines counter-clockwise, holes clockwise, in the plane's x-y.
     let polygon2d = |ring: &[[f64; 3]], ccw: bool| {
-        let mut pts: Vec<[f64; 2]> = ring.iter().map(to_plane).collect();
+        let mut pts: Vec<Coord<f64>> = ring.iter().map(to_plane).collect();
         if (signed_area(&pts) > 0.0) != ccw {
             pts.reverse();
         }
-        Polygon2d { points: pts.iter().map(|&[x, y]| Point2d { x: x as f32, y: y as f32 }).collect() }
+        Polygon2d { points: pts.iter().map(|c| Point2d { x: c.x as f32, y: c.y as f32 }).collect() }
     };
     let with_holes = |r: &Region| PolygonWithHoles2d {
         outer_boundary: polygon2d(&r.boundary, true),
@@ -154,9 +156,4 @@ fn planar_region(p: &MapPolygon) -> PlanarRegion {
         boundary,
         insets: p.insets.iter().map(with_holes).collect(),
     }
-}
-
-fn signed_area(pts: &[[f64; 2]]) -> f64 {
-    let n = pts.len();
-    (0..n).map(|i| pts[i][0] * pts[(i + 1) % n][1] - pts[(i + 1) % n][0] * pts[i][1]).sum::<f64>() / 2.0
 }

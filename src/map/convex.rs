@@ -7,6 +7,8 @@ use std::collections::HashMap;
 
 use geo::{Coord, Polygon as Shape, TriangulateDelaunay, triangulate_delaunay::DelaunayTriangulationConfig};
 
+use super::geometry::signed_area;
+
 /// A shape's constrained Delaunay triangles: the points, and each triangle's three indices
 /// counter-clockwise (degenerate ones left out).
 fn triangulate(shape: &Shape<f64>) -> (Vec<Coord<f64>>, Vec<Vec<usize>>) {
@@ -113,7 +115,7 @@ pub fn convex_region_around(shape: &Shape<f64>, at: Coord<f64>) -> Option<Vec<Co
     };
     let cut = cut_around(shape, seed);
     let grown = grow_from(&points, triangles, start);
-    [cut, grown].into_iter().filter(|r| r.len() >= 3).max_by(|a, b| coord_area(a).total_cmp(&coord_area(b)))
+    [cut, grown].into_iter().filter(|r| r.len() >= 3).max_by(|a, b| signed_area(a).total_cmp(&signed_area(b)))
 }
 
 /// The region `shape`'s convex hull leaves once cut clear of every edge of `shape`, around `q`.
@@ -121,7 +123,7 @@ fn cut_around(shape: &Shape<f64>, q: Coord<f64>) -> Vec<Coord<f64>> {
     use geo::ConvexHull;
     let hull = shape.convex_hull();
     let mut region = tidy(hull.exterior().0.to_vec());
-    if coord_area(&region) < 0.0 {
+    if signed_area(&region) < 0.0 {
         region.reverse();
     }
     let edges: Vec<(Coord<f64>, Coord<f64>)> = std::iter::once(shape.exterior())
@@ -249,13 +251,8 @@ fn grow_from(points: &[Coord<f64>], triangles: Vec<Vec<usize>>, start: usize) ->
     rings[start].take().map_or(Vec::new(), |ring| ring.into_iter().map(|i| points[i]).collect())
 }
 
-fn coord_area(ring: &[Coord<f64>]) -> f64 {
-    let n = ring.len();
-    (0..n).map(|i| ring[i].x * ring[(i + 1) % n].y - ring[(i + 1) % n].x * ring[i].y).sum::<f64>() / 2.0
-}
-
 fn ring_area(ring: &[usize], pts: &[Coord<f64>]) -> f64 {
-    coord_area(&ring.iter().map(|&i| pts[i]).collect::<Vec<_>>())
+    signed_area(&ring.iter().map(|&i| pts[i]).collect::<Vec<_>>())
 }
 
 fn cross(a: Coord<f64>, b: Coord<f64>, c: Coord<f64>) -> f64 {

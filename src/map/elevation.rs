@@ -114,7 +114,7 @@ pub fn rasterise(spec: GridSpec, surfaces: &[Surface]) -> Raster {
                 }
                 for col in first_col..=last_col as usize {
                     let y = top[1] - col as f64 * res;
-                    let z = (-(p.normal[0] * x + p.normal[1] * y + p.offset) / p.normal[2]) as f32;
+                    let z = p.height_at(x, y) as f32;
                     let k = spec.index(row, col);
                     if raster.elevation[k].is_nan() || raster.elevation[k] < z {
                         raster.elevation[k] = z;

@@ -2,9 +2,10 @@
 //! planner asks for it. Only insets count (the polygons shrunk by the foot margin, holes
 //! grown by it), so a foot placed anywhere in the answer stays on the surface.
 
-use geo::{Coord, Distance, Euclidean, LineString, Point, Polygon as Shape};
+use geo::{Coord, Distance, Euclidean, Point, Polygon as Shape};
 
-use super::{MapPolygon, MapSnapshot, Region};
+use super::geometry::top_down;
+use super::{MapPolygon, MapSnapshot};
 
 /// A foothold found for a point.
 #[derive(Clone, Debug)]
@@ -29,12 +30,12 @@ pub fn foothold(s: &MapSnapshot, p: [f64; 3]) -> Foothold<'_> {
     let at = Coord { x: p[0], y: p[1] };
     let mut best: Option<(f64, f64, &MapPolygon, Shape<f64>)> = None;
     for poly in s.polygons.iter().filter(|q| q.label.is_horizontal() && q.normal[2].abs() > 1e-3) {
-        let dz = (height_at(poly, at) - p[2]).abs();
+        let dz = (poly.height_at(at.x, at.y) - p[2]).abs();
         if dz > MAX_HEIGHT_DIFFERENCE_M {
             continue;
         }
         for inset in &poly.insets {
-            let shape = top_down(inset);
+            let shape = top_down(&inset.boundary, &inset.holes);
             let d = Euclidean.distance(&Point(at), &shape);
             if best.as_ref().is_none_or(|&(bd, bdz, _, _)| d < bd || (d == bd && dz < bdz)) {
                 best = Some((d, dz, poly, shape));
@@ -43,19 +44,8 @@ pub fn foothold(s: &MapSnapshot, p: [f64; 3]) -> Foothold<'_> {
     }
     let (distance, _, polygon, shape) = best?;
     let region = super::convex::convex_region_around(&shape, at)?;
-    let piece = region.into_iter().map(|c| [c.x, c.y, height_at(polygon, c)]).collect();
+    let piece = region.into_iter().map(|c| [c.x, c.y, polygon.height_at(c.x, c.y)]).collect();
     Some(Found { polygon, piece, distance })
-}
-
-/// The height of a polygon's plane at `c`, seen from above.
-fn height_at(poly: &MapPolygon, c: Coord<f64>) -> f64 {
-    -(poly.normal[0] * c.x + poly.normal[1] * c.y + poly.offset) / poly.normal[2]
-}
-
-/// A region seen from above, as a 2-D shape in world x, y.
-fn top_down(r: &Region) -> Shape<f64> {
-    let ring = |pts: &[[f64; 3]]| LineString::from(pts.iter().map(|p| Coord { x: p[0], y: p[1] }).collect::<Vec<_>>());
-    Shape::new(ring(&r.boundary), r.holes.iter().map(|h| ring(h)).collect())
 }
 
 /// Horizontal distance from `q` to a convex ring (0 inside).

@@ -199,6 +199,18 @@ pub fn inset_ring(frame: &PlaneFrame, ring: &[[f64; 3]], d: &[f64], outline: boo
     LineString::from(offset_vertices(&pts, &away).into_iter().map(|[x, y]| Coord { x, y }).collect::<Vec<_>>())
 }
 
+/// A polygon with holes (world frame) seen from above: its x and y as a 2-D shape.
+pub fn top_down(boundary: &[[f64; 3]], holes: &[Vec<[f64; 3]>]) -> Shape<f64> {
+    let ring = |pts: &[[f64; 3]]| LineString::from(pts.iter().map(|p| Coord { x: p[0], y: p[1] }).collect::<Vec<_>>());
+    Shape::new(ring(boundary), holes.iter().map(|h| ring(h)).collect())
+}
+
+/// Signed area of a 2-D ring (positive counter-clockwise), m^2 (shoelace).
+pub fn signed_area(ring: &[Coord<f64>]) -> f64 {
+    let n = ring.len();
+    (0..n).map(|i| ring[i].x * ring[(i + 1) % n].y - ring[(i + 1) % n].x * ring[i].y).sum::<f64>() / 2.0
+}
+
 /// Area enclosed by a ring, m^2 (shoelace).
 fn ring_area(r: &LineString<f64>) -> f64 {
     r.lines().map(|l| l.start.x * l.end.y - l.end.x * l.start.y).sum::<f64>().abs() / 2.0

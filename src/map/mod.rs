@@ -56,6 +56,13 @@ pub struct MapPolygon {
     pub step: Option<u32>,
 }
 
+impl MapPolygon {
+    /// The height of its plane over (x, y), seen from above (not for vertical polygons).
+    pub fn height_at(&self, x: f64, y: f64) -> f64 {
+        -(self.normal[0] * x + self.normal[1] * y + self.offset) / self.normal[2]
+    }
+}
+
 /// A polygon with holes on a map polygon's plane (world frame, metres): outline
 /// counter-clockwise seen from above the plane, holes clockwise, no closing repeat.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
