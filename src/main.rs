@@ -108,6 +108,9 @@ enum Command {
         /// Print the numbers as JSON
         #[arg(long)]
         json: bool,
+        /// Threads for the CPU stages (default: RAYON_NUM_THREADS, else one per core)
+        #[arg(long)]
+        threads: Option<usize>,
     },
     /// Map a whole sequence (extraction + global polygon map) and write the map and its picture
     Replay {
@@ -311,7 +314,13 @@ fn run(cli: Cli) -> Result<()> {
                     .with_context(|| format!("writing {}", path.display()))?;
             }
         }
-        Command::Bench { seq, backend, frames, config, json } => {
+        Command::Bench { seq, backend, frames, config, json, threads } => {
+            if let Some(n) = threads {
+                if !(1..=1024).contains(&n) {
+                    bail!("--threads {n}: give 1 to 1024");
+                }
+                rayon::ThreadPoolBuilder::new().num_threads(n).build_global().context("setting up the thread pool")?;
+            }
             let config = load_config(config, backend)?;
             bench(&Sequence::open(&seq)?, &config, frames, json)?;
         }
@@ -562,7 +571,7 @@ fn bench(s: &Sequence, config: &Config, frames: usize, json: bool) -> Result<()>
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({
                 "sequence": s.dir, "width": w, "height": h, "frames": frames,
-                "backend": extractor.backend(), "device": device, "fps": fps, "stages_ms": per_stage,
+                "backend": extractor.backend(), "device": device, "threads": rayon::current_num_threads(), "fps": fps, "stages_ms": per_stage,
             }))?
         );
         return Ok(());

@@ -176,7 +176,8 @@ fn a_ros_2_peer_on_rmw_zenoh_sees_polymap_s_topics_graph_and_services_and_feeds_
     // Heights between the floor and the top tread: how many treads the run reached depends
     // on the machine's speed, so the bound is the stair's own height, not a guess of progress.
     let truth: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(root().join("mock_frames/straight_320/truth.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(root().join("mock_frames/straight_320/truth.json")).unwrap())
+            .unwrap();
     let top = truth["stair"]["steps"].as_f64().unwrap() * truth["stair"]["rise"].as_f64().unwrap();
     let range = &t["elevation_range"];
     assert!(range[0].as_f64().unwrap() > -0.05 && range[1].as_f64().unwrap() < top + 0.05, "top tread {top} m: {t}");

@@ -227,7 +227,10 @@ impl Extractor {
             );
         }
         match &mut self.engine {
-            Engine::Cpu => extract_cpu(frame, intr, &self.cfg),
+            // On a pool thread: every parallel loop of the frame then starts where it is
+            // called, instead of each one waking a worker and putting this thread to sleep
+            // (dozens of hand-offs a frame, most of the time with one thread).
+            Engine::Cpu => rayon::scope(|_| extract_cpu(frame, intr, &self.cfg)),
             Engine::Gpu(gpu) => extract_gpu(gpu, frame, intr, &self.cfg),
         }
     }

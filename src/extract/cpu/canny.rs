@@ -9,33 +9,113 @@
 
 use rayon::prelude::*;
 
-use super::separable;
+use super::{ROWS_PER_TASK, widest_simd};
 use crate::extract::{Grid, label_components};
 
-const SOBEL_S: [f32; 3] = [1.0, 2.0, 1.0];
-const SOBEL_D: [f32; 3] = [-1.0, 0.0, 1.0];
-
 /// Gradient of the normal field: (magnitude, NMS sector 0..4) per pixel; sector 4 marks
-/// a pixel whose 3x3 neighbourhood lacks a normal (magnitude 0 there).
+/// a pixel whose 3x3 neighbourhood lacks a normal, or on the image's border (magnitude 0
+/// there). The fast loop: the normals are split into planes of x, y, z and validity once,
+/// then each row is one pass of plain slice arithmetic over the three rows around it, so
+/// it vectorises. Sums in the order of `gradient_at` (and of shaders/canny.wgsl): the
+/// results are the same bits.
 pub fn normal_gradient(normals: &Grid<[f32; 3]>) -> Grid<(f32, u8)> {
     let (w, h) = (normals.width, normals.height);
-    let channel = |c: usize| -> Vec<f32> { normals.data.iter().map(|n| n[c]).collect() };
-    let channels = [channel(0), channel(1), channel(2)];
-    let sobel =
-        |c: &Vec<f32>| (separable::filter(c, w, h, &SOBEL_D, &SOBEL_S), separable::filter(c, w, h, &SOBEL_S, &SOBEL_D));
-    let [(gx0, gy0), (gx1, gy1), (gx2, gy2)] = channels.each_ref().map(sobel);
-    let valid: Vec<bool> = normals.data.iter().map(|n| *n != [0.0; 3]).collect();
-    let all_valid = separable::window_all_valid(&valid, w, h, 1);
     let mut data = vec![(0.0f32, 4u8); w * h];
-    data.par_chunks_mut(w).enumerate().for_each(|(v, out)| {
-        for (u, g) in out.iter_mut().enumerate() {
-            let i = v * w + u;
-            if all_valid[i] {
-                *g = gradient_sector([gx0[i], gx1[i], gx2[i]], [gy0[i], gy1[i], gy2[i]]);
+    if w >= 3 && h >= 3 {
+        // Row v of `planes` is [x; w] [y; w] [z; w] [1 where a normal, else 0; w].
+        let mut planes = vec![0.0f32; 4 * w * h];
+        planes.par_chunks_mut(4 * w).zip(normals.data.par_chunks(w)).with_min_len(ROWS_PER_TASK).for_each(
+            |(planes, row)| {
+                for (u, n) in row.iter().enumerate() {
+                    planes[u] = n[0];
+                    planes[w + u] = n[1];
+                    planes[2 * w + u] = n[2];
+                    planes[3 * w + u] = f32::from(u8::from(*n != [0.0; 3]));
+                }
+            },
+        );
+        data.par_chunks_mut(w).enumerate().with_min_len(ROWS_PER_TASK).for_each_init(
+            || vec![0.0f32; 7 * w],
+            |scratch, (v, out)| {
+                if v >= 1 && v + 1 < h {
+                    gradient_row(&planes[(v - 1) * 4 * w..(v + 2) * 4 * w], &mut out[1..w - 1], w, scratch);
+                }
+            },
+        );
+    }
+    Grid { width: w, height: h, data }
+}
+
+widest_simd! {
+    /// One row of `normal_gradient`: `planes` holds the planes of the rows above, at and
+    /// below it; `out` is the row's interior (columns 1 ..= w - 2); `scratch` 7w floats.
+    fn gradient_row(planes: &[f32], out: &mut [(f32, u8)], w: usize, scratch: &mut [f32]) = gradient_row_portable
+}
+
+/// Loops over equal-length slices only, so that they carry no bounds checks and vectorise.
+#[inline(always)]
+fn gradient_row_portable(planes: &[f32], out: &mut [(f32, u8)], w: usize, scratch: &mut [f32]) {
+    let n = out.len();
+    // Taps left, centre and right of plane c of row j (0 above, 1 at, 2 below).
+    let taps = |j: usize, c: usize| {
+        let p = &planes[(4 * j + c) * w..][..n + 2];
+        (&p[..n], &p[1..n + 1], &p[2..n + 2])
+    };
+    let (sums, ok) = scratch.split_at_mut(6 * n);
+    let ok = &mut ok[..n];
+    for (c, g) in sums.chunks_exact_mut(2 * n).enumerate() {
+        let (gx, gy) = g.split_at_mut(n);
+        let ((l0, m0, r0), (l1, _, r1), (l2, m2, r2)) = (taps(0, c), taps(1, c), taps(2, c));
+        for i in 0..n {
+            // Row sums, then the column (d = -1 0 1 along, s = 1 2 1 across).
+            gx[i] = (r0[i] - l0[i]) + 2.0 * (r1[i] - l1[i]) + (r2[i] - l2[i]);
+            gy[i] = (l2[i] + 2.0 * m2[i] + r2[i]) - (l0[i] + 2.0 * m0[i] + r0[i]);
+        }
+    }
+    ok.fill(1.0);
+    for j in 0..3 {
+        let (l, m, r) = taps(j, 3);
+        for i in 0..n {
+            ok[i] = ok[i].min(l[i]).min(m[i]).min(r[i]);
+        }
+    }
+    let (g0, rest) = sums.split_at(2 * n);
+    let (g1, g2) = rest.split_at(2 * n);
+    let ((gx0, gy0), (gx1, gy1), (gx2, gy2)) = (g0.split_at(n), g1.split_at(n), g2.split_at(n));
+    for i in 0..n {
+        let (m, sector) = gradient_sector([gx0[i], gx1[i], gx2[i]], [gy0[i], gy1[i], gy2[i]]);
+        out[i] = if ok[i] == 1.0 { (m, sector) } else { (0.0, 4) };
+    }
+}
+
+/// The oracle of `normal_gradient`: pixel (u, v) alone, line for line as shaders/canny.wgsl
+/// computes it.
+pub fn gradient_at(normals: &Grid<[f32; 3]>, u: usize, v: usize) -> (f32, u8) {
+    let (w, h) = (normals.width, normals.height);
+    if u == 0 || v == 0 || u + 1 >= w || v + 1 >= h {
+        return (0.0, 4);
+    }
+    let (s, d) = ([1.0f32, 2.0, 1.0], [-1.0f32, 0.0, 1.0]);
+    let (mut gx, mut gy) = ([0.0f32; 3], [0.0f32; 3]);
+    // Row sums first, then the column.
+    for j in 0..3 {
+        let (mut row_x, mut row_y) = ([0.0f32; 3], [0.0f32; 3]);
+        for t in 0..3 {
+            let n = normals.data[(v + j - 1) * w + u + t - 1];
+            if n == [0.0; 3] {
+                return (0.0, 4);
+            }
+            for c in 0..3 {
+                row_x[c] += d[t] * n[c];
+                row_y[c] += s[t] * n[c];
             }
         }
-    });
-    Grid { width: w, height: h, data }
+        for c in 0..3 {
+            gx[c] += s[j] * row_x[c];
+            gy[c] += d[j] * row_y[c];
+        }
+    }
+    gradient_sector(gx, gy)
 }
 
 /// Magnitude and NMS sector (0: along u, 1: diagonal u+v, 2: along v, 3: diagonal u-v)
@@ -202,4 +282,47 @@ pub fn dilate(mask: &Grid<u8>, r: usize, outside: u8) -> Grid<u8> {
         }
     });
     Grid { width: w, height: h, data }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::extract::cpu::{diffusion, normals};
+    use crate::synth::{NoiseModel, Scene, SceneKind, noisy_depth, path::trajectory, render};
+    use crate::types::Intrinsics;
+
+    /// Normals of a noisy stair frame with sensor dropouts, as the pipeline makes them.
+    fn stair_normals() -> Grid<[f32; 3]> {
+        let scene = Scene::build(SceneKind::Straight);
+        let pose = trajectory(&scene, 30)[12];
+        let intr = Intrinsics::L515_320X240;
+        let pixels = noisy_depth(&render(&scene, &intr, &pose), &NoiseModel::l515(2.0), 7, 0);
+        let (w, h) = (intr.width as usize, intr.height as usize);
+        let mut depth = Grid { width: w, height: h, data: pixels.iter().map(|&d| d as f32 * 0.00025).collect() };
+        // Dropouts of every size the gradient's validity test must see.
+        for (k, z) in depth.data.iter_mut().enumerate() {
+            if k % 997 == 0 || (k / w) % 61 == 3 && (k % w) % 43 < 5 {
+                *z = 0.0;
+            }
+        }
+        let smoothed = diffusion::diffuse(&depth, 20, 0.0335, 0.2);
+        normals::normals(&smoothed, &intr, 5)
+    }
+
+    #[test]
+    fn fast_gradient_is_the_oracle_bit_for_bit() {
+        let n = stair_normals();
+        let fast = normal_gradient(&n);
+        let mut edges = 0;
+        for v in 0..n.height {
+            for u in 0..n.width {
+                let (m, s) = fast.data[v * n.width + u];
+                let (want_m, want_s) = gradient_at(&n, u, v);
+                assert_eq!((m.to_bits(), s), (want_m.to_bits(), want_s), "pixel ({u}, {v})");
+                edges += usize::from(s != 4 && m > 0.05);
+            }
+        }
+        let holes = fast.data.iter().filter(|g| g.1 == 4).count();
+        assert!(edges > 500 && holes > 1000, "the frame has edges ({edges}) and holes ({holes}) to compare");
+    }
 }

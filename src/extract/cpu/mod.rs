@@ -6,6 +6,9 @@ pub mod normals;
 pub mod ransac;
 pub mod separable;
 
+/// Rows per rayon task in the per-row loops: one row is too little work to be worth a thread hop.
+pub(crate) const ROWS_PER_TASK: usize = 8;
+
 /// Defines `$name` to run `$portable` (an `#[inline(always)]` fn) compiled for AVX2
 /// when the CPU has it, else as compiled for the baseline target. The loops are plain
 /// Rust either way; only the width of the vectors the compiler may use differs, which

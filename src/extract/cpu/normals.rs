@@ -9,7 +9,7 @@
 
 use rayon::prelude::*;
 
-use super::separable;
+use super::{ROWS_PER_TASK, separable};
 use crate::extract::Grid;
 use crate::types::Intrinsics;
 
@@ -35,15 +35,56 @@ pub fn normals(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32) -> Grid<[f32; 
     let valid: Vec<bool> = z.iter().map(|&z| z != 0.0).collect();
     let all_valid = separable::window_all_valid(&valid, w, h, r);
     let mut data = vec![[0.0f32; 3]; w * h];
-    data.par_chunks_mut(w).enumerate().for_each(|(v, out)| {
-        for (u, n) in out.iter_mut().enumerate() {
-            let i = v * w + u;
-            if all_valid[i] {
-                *n = surface_normal(z[i], zu[i] / norm, zv[i] / norm, u as f32, v as f32, fx, fy, cx, cy);
-            }
-        }
+    data.par_chunks_mut(w).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, out)| {
+        let row = v * w..(v + 1) * w;
+        let camera = [fx, fy, cx, cy, norm, v as f32];
+        normals_row(&z[row.clone()], &zu[row.clone()], &zv[row.clone()], &all_valid[row], out, camera);
     });
     Grid { width: w, height: h, data }
+}
+
+super::widest_simd! {
+    /// One row of normals: `camera` is [fx, fy, cx, cy, the Sobel norm, the row's v].
+    fn normals_row(z: &[f32], zu: &[f32], zv: &[f32], ok: &[bool], out: &mut [[f32; 3]], camera: [f32; 6]) = normals_row_portable
+}
+
+/// Equal-length slices and a branch-free `surface_normal`: the loop vectorises.
+#[inline(always)]
+fn normals_row_portable(z: &[f32], zu: &[f32], zv: &[f32], ok: &[bool], out: &mut [[f32; 3]], camera: [f32; 6]) {
+    let [fx, fy, cx, cy, norm, v] = camera;
+    let n = out.len();
+    let (z, zu, zv, ok) = (&z[..n], &zu[..n], &zv[..n], &ok[..n]);
+    for u in 0..n {
+        let normal = surface_normal(z[u], zu[u] / norm, zv[u] / norm, u as f32, v, fx, fy, cx, cy);
+        out[u] = if ok[u] { normal } else { [0.0; 3] };
+    }
+}
+
+/// The oracle of `normals`: pixel (u, v) alone, line for line as shaders/normals.wgsl
+/// computes it (row sums, then the column; any invalid tap or the border gives zero).
+pub fn normal_at(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32, u: usize, v: usize) -> [f32; 3] {
+    let (w, h) = (depth.width, depth.height);
+    let (smooth, deriv, norm) = sobel_kernel(kernel);
+    let r = smooth.len() / 2;
+    if v < r || v + r >= h || u < r || u + r >= w {
+        return [0.0; 3];
+    }
+    let (mut gu, mut gv) = (0.0f32, 0.0f32);
+    for j in 0..smooth.len() {
+        let (mut row_u, mut row_v) = (0.0f32, 0.0f32);
+        for t in 0..smooth.len() {
+            let z = depth.data[(v + j - r) * w + u + t - r];
+            if z == 0.0 {
+                return [0.0; 3];
+            }
+            row_u += deriv[t] * z;
+            row_v += smooth[t] * z;
+        }
+        gu += smooth[j] * row_u;
+        gv += deriv[j] * row_v;
+    }
+    let (fx, fy, cx, cy) = (intr.fx as f32, intr.fy as f32, intr.cx as f32, intr.cy as f32);
+    surface_normal(depth.data[v * w + u], gu / norm, gv / norm, u as f32, v as f32, fx, fy, cx, cy)
 }
 
 /// The exact normal of the back-projected surface at pixel (u, v) of depth z, from
@@ -56,11 +97,48 @@ pub fn surface_normal(z: f32, zu: f32, zv: f32, u: f32, v: f32, fx: f32, fy: f32
     let b = [zv * x, zv * y + z / fy, zv];
     let mut n = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-    if !(len > 0.0) {
-        return [0.0; 3];
-    }
-    // Face the camera: n . ray < 0.
+    // Face the camera: n . ray < 0. Selects, not early returns, so that loops over
+    // pixels vectorise (a zero length gives NaNs here, replaced by the zero normal).
     let s = if n[0] * x + n[1] * y + n[2] > 0.0 { -1.0 / len } else { 1.0 / len };
     n.iter_mut().for_each(|c| *c *= s);
-    n
+    if len > 0.0 { n } else { [0.0; 3] }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::{NoiseModel, Scene, SceneKind, noisy_depth, path::trajectory, render};
+
+    #[test]
+    fn fast_normals_are_the_oracle_bit_for_bit() {
+        let scene = Scene::build(SceneKind::Spiral);
+        let pose = trajectory(&scene, 30)[9];
+        let intr = Intrinsics::L515_320X240;
+        let pixels = noisy_depth(&render(&scene, &intr, &pose), &NoiseModel::l515(2.0), 3, 0);
+        let w = intr.width as usize;
+        // Dropouts: single pixels and short runs.
+        let data = pixels
+            .iter()
+            .enumerate()
+            .map(
+                |(k, &d)| if k % 1009 == 0 || (k / w) % 53 == 7 && (k % w) % 37 < 4 { 0.0 } else { d as f32 * 0.00025 },
+            )
+            .collect();
+        let depth = Grid { width: w, height: intr.height as usize, data };
+        for kernel in [3, 5, 7] {
+            let fast = normals(&depth, &intr, kernel);
+            for v in 0..depth.height {
+                for u in 0..w {
+                    let want = normal_at(&depth, &intr, kernel, u, v);
+                    assert_eq!(
+                        fast.data[v * w + u].map(f32::to_bits),
+                        want.map(f32::to_bits),
+                        "kernel {kernel}, ({u}, {v})"
+                    );
+                }
+            }
+            let zero = fast.data.iter().filter(|n| **n == [0.0; 3]).count();
+            assert!(zero > 1000 && zero < depth.data.len() / 2, "kernel {kernel}: {zero} pixels without a normal");
+        }
+    }
 }

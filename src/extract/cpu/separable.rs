@@ -5,10 +5,7 @@
 
 use rayon::prelude::*;
 
-use super::widest_simd;
-
-/// Rows per rayon task: one row is too little work to be worth a thread hop.
-const ROWS_PER_TASK: usize = 8;
+use super::{ROWS_PER_TASK, widest_simd};
 
 /// Σ_j along_v[j] Σ_i along_u[i] ch(u + i - r, v + j - r) for every pixel at least r
 /// from the border (r = half the kernel length); 0 within r of it.
