@@ -4,8 +4,9 @@
 //! remote planner (a client of the router too) following both maps.
 //!
 //! Mid-run the router is killed (SIGKILL) and started again on the same port. Every client
-//! reconnects by itself; the planner's followers notice the updates lost during the outage
-//! and take the whole map again. Once the maps stop changing, each follower holds exactly
+//! reconnects by itself; the planner's followers notice any updates lost during the outage
+//! and take the whole map again (whether any are lost depends on timing: each robot's VINS
+//! reaches its mapper through the router too). Once the maps stop changing, each follower holds exactly
 //! what its robot's get_map answers, and nothing of the other robot's.
 
 mod common;
@@ -163,7 +164,16 @@ async fn a_planner_follows_two_robots_through_a_router_that_restarts() {
             truth.polygons.len()
         );
         assert!(before > 0, "{}: updates before the outage", robot.name);
-        assert!(f.counters.whole_maps_taken >= 2, "{} took a whole map again after the outage", robot.name);
+        // Whether updates were lost depends on timing: the robot's VINS reaches its mapper
+        // through the router too, so during the outage the mapper has no poses and may
+        // publish nothing. Lost updates must be noticed and mended by a whole map; none lost
+        // means every version was applied in turn (the final map is checked above either way).
+        assert!(
+            f.counters.gaps == 0 || f.counters.whole_maps_taken >= 2,
+            "{} missed updates and did not take the whole map again: {:?}",
+            robot.name,
+            f.counters
+        );
     }
     // Two robots, two different maps.
     assert_ne!(finals[0].epoch, finals[1].epoch);
