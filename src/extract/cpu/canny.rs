@@ -211,15 +211,11 @@ pub fn boundary(
 ) -> Grid<u8> {
     let (w, h) = (depth.width, depth.height);
     let mut lines = vec![0u8; w * h];
-    lines.par_chunks_mut(w).enumerate().for_each(|(v, out)| {
-        for u in 0..w {
-            let i = v * w + u;
-            let z = depth.data[i];
-            let step = any_4_neighbour(u, v, w, h, |j| {
-                z != 0.0 && depth.data[j] != 0.0 && (depth.data[j] - z).abs() > ratio * z
-            });
-            out[u] = (canny.data[i] != 0 || step) as u8;
-        }
+    lines.par_chunks_mut(w).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, out)| {
+        let row = |v: usize| &depth.data[v * w..(v + 1) * w];
+        let (above, below) = ((v > 0).then(|| row(v - 1)), (v + 1 < h).then(|| row(v + 1)));
+        depth_steps(row(v), above.unwrap_or(&[]), below.unwrap_or(&[]), out, ratio);
+        out.iter_mut().zip(&canny.data[v * w..(v + 1) * w]).for_each(|(o, &c)| *o |= u8::from(c != 0));
     });
     let closed = close(&Grid { width: w, height: h, data: lines }, closing);
     let with_holes = Grid {
@@ -229,23 +225,46 @@ pub fn boundary(
     };
     let sealed = close(&with_holes, seal);
     // Regions are 8-connected (as contour tracing sees them), so a thin diagonal line
-    // would leak: growing each line pixel into its 4-neighbours seals it.
+    // would leak: growing each line pixel into its 4-neighbours (a plus-shaped dilation,
+    // in whole rows) seals it.
     let mut out = vec![0u8; w * h];
-    out.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
-        for u in 0..w {
-            let i = v * w + u;
-            let line = closed.data[i] != 0 || any_4_neighbour(u, v, w, h, |j| closed.data[j] != 0);
-            row[u] = (line || sealed.data[i] != 0) as u8;
+    out.par_chunks_mut(w).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, row)| {
+        let line = |v: usize| &closed.data[v * w..(v + 1) * w];
+        row.copy_from_slice(line(v));
+        for (o, &left) in row[1..].iter_mut().zip(line(v)) {
+            *o |= left;
         }
+        for (o, &right) in row.iter_mut().zip(&line(v)[1..]) {
+            *o |= right;
+        }
+        for j in [v.wrapping_sub(1), v + 1] {
+            if j < h {
+                row.iter_mut().zip(line(j)).for_each(|(o, &l)| *o |= l);
+            }
+        }
+        row.iter_mut().zip(&sealed.data[v * w..(v + 1) * w]).for_each(|(o, &s)| *o |= s);
     });
     Grid { width: w, height: h, data: out }
 }
 
-/// Whether `f` holds for the index of any 4-neighbour of (u, v) inside a w x h image.
-#[inline]
-fn any_4_neighbour(u: usize, v: usize, w: usize, h: usize, f: impl Fn(usize) -> bool) -> bool {
-    let i = v * w + u;
-    (u > 0 && f(i - 1)) || (u + 1 < w && f(i + 1)) || (v > 0 && f(i - w)) || (v + 1 < h && f(i + w))
+/// 1 in `out` where the depth steps to a 4-neighbour by more than `ratio` times the depth
+/// (both valid); `above` and `below` are the neighbouring rows, empty beyond the image.
+/// Whole-row comparisons, so the loops vectorise.
+fn depth_steps(row: &[f32], above: &[f32], below: &[f32], out: &mut [u8], ratio: f32) {
+    let jump = |z: f32, q: f32| u8::from(z != 0.0 && q != 0.0 && (q - z).abs() > ratio * z);
+    let w = row.len();
+    out.fill(0);
+    for (o, (&z, &q)) in out[..w.saturating_sub(1)].iter_mut().zip(row.iter().zip(&row[1.min(w)..])) {
+        *o |= jump(z, q);
+    }
+    for (o, (&z, &q)) in out[1.min(w)..].iter_mut().zip(row[1.min(w)..].iter().zip(row)) {
+        *o |= jump(z, q);
+    }
+    for other in [above, below] {
+        for (o, (&z, &q)) in out.iter_mut().zip(row.iter().zip(other)) {
+            *o |= jump(z, q);
+        }
+    }
 }
 
 /// Morphological close (dilate, then erode) with a `size` x `size` square; outside the
@@ -307,6 +326,71 @@ mod tests {
         }
         let smoothed = diffusion::diffuse(&depth, 20, 0.0335, 0.2);
         normals::normals(&smoothed, &intr, 5)
+    }
+
+    /// `boundary` by its definition, pixel by pixel: depth steps to a 4-neighbour, the close
+    /// as a min of maxes over squares (outside counting as edge), the 4-neighbour growth.
+    fn boundary_by_definition(canny: &Grid<u8>, depth: &Grid<f32>, ratio: f32, normals: &Grid<[f32; 3]>) -> Vec<u8> {
+        let (w, h) = (depth.width as isize, depth.height as isize);
+        let at = |g: &[u8], u: isize, v: isize, outside: u8| {
+            if u < 0 || v < 0 || u >= w || v >= h { outside } else { g[(v * w + u) as usize] }
+        };
+        let n4 = [(1, 0), (-1, 0), (0, 1), (0, -1)];
+        let mut lines = vec![0u8; (w * h) as usize];
+        for v in 0..h {
+            for u in 0..w {
+                let z = depth.data[(v * w + u) as usize];
+                let step = n4.iter().any(|&(du, dv)| {
+                    let (x, y) = (u + du, v + dv);
+                    x >= 0 && y >= 0 && x < w && y < h && {
+                        let q = depth.data[(y * w + x) as usize];
+                        z != 0.0 && q != 0.0 && (q - z).abs() > ratio * z
+                    }
+                });
+                lines[(v * w + u) as usize] = u8::from(canny.data[(v * w + u) as usize] != 0 || step);
+            }
+        }
+        let close = |g: &[u8], size: isize| -> Vec<u8> {
+            let r = size / 2;
+            let square = |g: &[u8], u: isize, v: isize, f: fn(u8, u8) -> u8, start: u8, outside: u8| {
+                (-r..=r)
+                    .flat_map(|dv| (-r..=r).map(move |du| (du, dv)))
+                    .fold(start, |m, (du, dv)| f(m, at(g, u + du, v + dv, outside)))
+            };
+            let dilated: Vec<u8> = (0..w * h).map(|i| square(g, i % w, i / w, u8::max, 0, 1)).collect();
+            (0..w * h).map(|i| square(&dilated, i % w, i / w, u8::min, 1, 1)).collect()
+        };
+        let closed = close(&lines, 7);
+        let with_holes: Vec<u8> =
+            closed.iter().zip(&normals.data).map(|(&l, n)| u8::from(l != 0 || *n == [0.0; 3])).collect();
+        let sealed = close(&with_holes, 5);
+        (0..w * h)
+            .map(|i| {
+                let (u, v) = (i % w, i / w);
+                let line = closed[i as usize] != 0 || n4.iter().any(|&(du, dv)| at(&closed, u + du, v + dv, 0) != 0);
+                u8::from(line || sealed[i as usize] != 0)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn fast_boundary_is_its_definition() {
+        let n = stair_normals();
+        let (w, h) = (n.width, n.height);
+        // Depth with steps and holes, Canny lines from the gradient of these normals.
+        let depth = Grid {
+            width: w,
+            height: h,
+            data: (0..w * h)
+                .map(|i| if n.data[i] == [0.0; 3] && i % 3 == 0 { 0.0 } else { 1.0 + 0.3 * ((i % w) / 40) as f32 })
+                .collect(),
+        };
+        let canny = canny(&normal_gradient(&n), 0.05, 0.1);
+        let fast = boundary(&canny, &depth, 0.03, &n, 7, 5);
+        let want = boundary_by_definition(&canny, &depth, 0.03, &n);
+        assert_eq!(fast.data, want);
+        let ones = want.iter().filter(|&&b| b != 0).count();
+        assert!(ones > w * h / 20 && ones < w * h * 9 / 10, "a boundary worth comparing: {ones} of {} px", w * h);
     }
 
     #[test]
