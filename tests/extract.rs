@@ -438,3 +438,23 @@ fn a_polygon_is_cut_at_a_neighbour_plane_that_bounds_its_points_but_not_at_one_i
     let max_x = polygons[0].boundary.iter().map(|v| v[0]).fold(f64::MIN, f64::max);
     assert_eq!(max_x, 0.52, "the floor is left whole");
 }
+
+#[test]
+fn bench_runs_the_cpu_stages_on_the_threads_it_is_given() {
+    for threads in [1, 2] {
+        let run = std::process::Command::new(env!("CARGO_BIN_EXE_polymap"))
+            .args(["bench", "mock_frames/straight_320", "--backend", "cpu", "--frames", "3", "--json", "--threads"])
+            .arg(threads.to_string())
+            .output()
+            .unwrap();
+        assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+        assert_eq!(v["threads"], threads, "{v}");
+        assert_eq!(v["device"], format!("CPU twin, {threads} threads"));
+        for stage in ["upload", "diffusion", "normals", "edges", "contours", "ransac", "polygons", "total"] {
+            let median = v["stages_ms"][stage]["median"].as_f64().unwrap();
+            assert!(median.is_finite() && median >= 0.0, "{stage}: {v}");
+        }
+        assert!(v["stages_ms"]["total"]["median"].as_f64().unwrap() > 0.0);
+    }
+}

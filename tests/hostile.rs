@@ -411,6 +411,7 @@ fn every_numeric_command_line_option_given_absurd_values_is_refused_or_handled()
         &["synth", out, "--frames", "1", "--width", "32", "--fps", "{}"],
         &["extract", seq, "--frame", "{}", "--backend", "cpu", "--out", out],
         &["bench", seq, "--frames", "{}", "--backend", "cpu"],
+        &["bench", seq, "--frames", "1", "--backend", "cpu", "--threads", "{}"],
         &["run", "--duration", "{}", "--config", config],
         &["demo", "--duration", "{}", "--config", config, "--out", out],
         &["demo", "--duration", "0.001", "--vins-rate", "{}", "--config", config, "--out", out],
