@@ -52,7 +52,6 @@ struct ImageBuffers {
 pub struct ImageStages {
     pub smoothed: Grid<f32>,
     pub normals: Grid<[f32; 3]>,
-    pub gradient: Grid<(f32, u8)>,
     /// Non-maximum-suppressed double-threshold classes: 0 none, 1 weak, 2 strong.
     pub class: Grid<u8>,
     /// Milliseconds: upload, diffusion, normals, edges (gradient + classes + readback).
@@ -302,19 +301,13 @@ impl Gpu {
             .chunks_exact(3)
             .map(|c| [c[0], c[1], c[2]])
             .collect();
-        let magnitude: Vec<f32> = bytemuck::cast_slice(&self.read(&b.magnitude, n * 4)?).to_vec();
-        let sector: Vec<u32> = bytemuck::cast_slice(&self.read(&b.sector, n * 4)?).to_vec();
+        // The gradient's magnitude and sector stay on the GPU: only classify reads them.
         let class: Vec<u32> = bytemuck::cast_slice(&self.read(&b.class, n * 4)?).to_vec();
         // Readbacks count to the edges stage, the last one.
         let readback = lap();
         Ok(ImageStages {
             smoothed: grid(smoothed),
             normals: Grid { width: w as usize, height: h as usize, data: normals },
-            gradient: Grid {
-                width: w as usize,
-                height: h as usize,
-                data: magnitude.into_iter().zip(sector).map(|(m, s)| (m, s as u8)).collect(),
-            },
             class: Grid { width: w as usize, height: h as usize, data: class.into_iter().map(|c| c as u8).collect() },
             times: [upload, diffusion, normals_ms, edges + readback],
         })
