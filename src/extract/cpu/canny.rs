@@ -252,12 +252,12 @@ pub fn boundary(
 /// Whole-row comparisons, so the loops vectorise.
 fn depth_steps(row: &[f32], above: &[f32], below: &[f32], out: &mut [u8], ratio: f32) {
     let jump = |z: f32, q: f32| u8::from(z != 0.0 && q != 0.0 && (q - z).abs() > ratio * z);
-    let w = row.len();
     out.fill(0);
-    for (o, (&z, &q)) in out[..w.saturating_sub(1)].iter_mut().zip(row.iter().zip(&row[1.min(w)..])) {
+    // Right neighbours (zip stops at the row's end), then left ones; rows are never empty.
+    for (o, (&z, &q)) in out.iter_mut().zip(row.iter().zip(&row[1..])) {
         *o |= jump(z, q);
     }
-    for (o, (&z, &q)) in out[1.min(w)..].iter_mut().zip(row[1.min(w)..].iter().zip(row)) {
+    for (o, (&z, &q)) in out[1..].iter_mut().zip(row[1..].iter().zip(row)) {
         *o |= jump(z, q);
     }
     for other in [above, below] {

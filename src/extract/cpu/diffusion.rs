@@ -72,19 +72,16 @@ fn diffuse_band_portable(cur: &[f32], out: &mut [f32], first: usize, pw: usize, 
     for (k, o) in out.chunks_mut(pw).enumerate() {
         let p = first + k + 1;
         let row = &cur[p * pw..(p + 1) * pw];
-        // across[i]: flux into padded pixel i from pixel i + 1. Zipped slices, not
-        // indices: without bounds checks in them the loops vectorise.
-        for ((a, &z), &q) in across.iter_mut().zip(&row[..w + 1]).zip(&row[1..w + 2]) {
-            *a = pair_flux(z, q, inv_kappa);
+        // across[i]: flux into padded pixel i from pixel i + 1.
+        for i in 0..w + 1 {
+            across[i] = pair_flux(row[i], row[i + 1], inv_kappa);
         }
         std::mem::swap(&mut into_row, &mut from_below);
         vertical_fluxes(cur, p, pw, inv_kappa, &mut from_below);
         let (o, c) = (&mut o[1..w + 1], &row[1..w + 1]);
-        let pairs = across.iter().zip(&across[1..]);
-        for ((((o, &c), (&left, &right)), &below), &above) in
-            o.iter_mut().zip(c).zip(pairs).zip(&from_below).zip(&into_row)
-        {
-            *o = c + gamma * (right - left + below - above);
+        for i in 0..w {
+            let sum = across[i + 1] - across[i] + from_below[i] - into_row[i];
+            o[i] = c[i] + gamma * sum;
         }
     }
 }
@@ -95,8 +92,8 @@ fn diffuse_band_portable(cur: &[f32], out: &mut [f32], first: usize, pw: usize, 
 fn vertical_fluxes(cur: &[f32], p: usize, pw: usize, inv_kappa: f32, out: &mut [f32]) {
     let w = out.len();
     let (row, down) = (&cur[p * pw + 1..p * pw + 1 + w], &cur[(p + 1) * pw + 1..(p + 1) * pw + 1 + w]);
-    for ((o, &z), &q) in out.iter_mut().zip(row).zip(down) {
-        *o = pair_flux(z, q, inv_kappa);
+    for i in 0..w {
+        out[i] = pair_flux(row[i], down[i], inv_kappa);
     }
 }
 
