@@ -10,7 +10,7 @@ use std::time::Instant;
 use nalgebra::Isometry3;
 use polymap::bench::spread;
 use polymap::config::MapConfig;
-use polymap::extract::{Grid, Polygon};
+use polymap::extract::{Grid, Polygon, VertexKind};
 use polymap::map::PolygonMap;
 use polymap::synth::path::camera_pose;
 use polymap::types::Intrinsics;
@@ -30,6 +30,8 @@ fn seen(i: usize, t_camera_world: &Isometry3<f64>) -> Polygon {
         area: 0.04,
         boundary: vec![[x, y, z], [x + 0.2, y, z], [x + 0.2, y + 0.2, z], [x + 0.1, y + 0.25, z], [x, y + 0.2, z]],
         holes: vec![],
+        boundary_kinds: vec![VertexKind::Inside; 5],
+        hole_kinds: vec![],
         pixel_count: 2000,
         inlier_ratio: 1.0,
         rms: 0.002,

@@ -214,6 +214,50 @@ fn stair_frame_yields_level_treads_at_the_right_heights() {
 }
 
 #[test]
+fn every_vertex_says_what_it_lies_on_and_does_lie_there() {
+    use polymap::extract::{VertexKind, polygon::BORDER_PX};
+    let (depth, i, _, _) = frame(SceneKind::Straight, 320, 20, 2.0);
+    let (out, _, _) = extract_cpu(&depth, &i, &PipelineConfig::default()).unwrap();
+    let (mut cuts, mut borders, mut inside) = (0, 0, 0);
+    for p in &out.polygons {
+        assert_eq!(p.boundary_kinds.len(), p.boundary.len(), "polygon {}", p.id);
+        assert_eq!(p.hole_kinds.len(), p.holes.len());
+        let rings = std::iter::once((&p.boundary, &p.boundary_kinds)).chain(p.holes.iter().zip(&p.hole_kinds));
+        for (ring, kinds) in rings {
+            assert_eq!(ring.len(), kinds.len());
+            for (v, kind) in ring.iter().zip(kinds) {
+                let (u, r) = i.project(&nalgebra::Point3::from(*v));
+                // A vertex lies half a pixel outside its region's pixel centres; a border
+                // vertex pulled onto its pixel's point moves by a few pixels at most.
+                let margin = |edge: f64| {
+                    u < edge || r < edge || u > i.width as f64 - 1.0 - edge || r > i.height as f64 - 1.0 - edge
+                };
+                match kind {
+                    // A neighbour too small to publish leaves None: nothing to check it against.
+                    VertexKind::Cut { neighbour: None } => {}
+                    VertexKind::Cut { neighbour: Some(n) } => {
+                        cuts += 1;
+                        let q = &out.polygons[*n as usize];
+                        let off = Vector3::from(q.normal).dot(&Vector3::from(*v)) + q.offset;
+                        assert!(off.abs() < 1e-9, "a cut vertex of {} lies on {}'s plane: {off} m off", p.id, q.id);
+                    }
+                    VertexKind::ImageBorder => {
+                        borders += 1;
+                        assert!(margin(BORDER_PX as f64 + 4.0), "border vertex at ({u:.1}, {r:.1})");
+                    }
+                    VertexKind::Inside => {
+                        inside += 1;
+                        assert!(!margin(BORDER_PX as f64 - 1.0), "inside vertex at ({u:.1}, {r:.1})");
+                    }
+                }
+            }
+        }
+    }
+    // Treads cut at their risers, outlines running off the image, and pixel outlines.
+    assert!(cuts >= 6 && borders >= 6 && inside >= 6, "cut {cuts}, border {borders}, inside {inside}");
+}
+
+#[test]
 fn a_tread_running_off_the_top_of_the_image_ends_near_its_back_edge() {
     // Frame 45 of the 180-frame walk: tread 2 (x 0.28..0.56, z 0.30) runs off the top of
     // the image, where the next riser begins; its outline's pixels there can be the riser's
@@ -401,16 +445,18 @@ fn outlines_cover_their_pixels_squares_and_holes_shrink() {
 }
 
 #[test]
-fn a_polygon_is_cut_at_a_neighbour_plane_that_bounds_its_points_but_not_at_one_it_crosses() {
-    use polymap::extract::{Polygon, trim::trim_at_neighbour_planes};
+fn a_polygon_is_cut_at_a_neighbour_plane_that_meets_it_and_bounds_its_points_and_nowhere_else() {
+    use polymap::extract::{Polygon, VertexKind, trim::trim_at_neighbour_planes};
     let rect = |x0: f64, x1: f64| vec![[x0, 0.0, 0.0], [x1, 0.0, 0.0], [x1, 1.0, 0.0], [x0, 1.0, 0.0]];
     let polygon = |normal: [f64; 3], offset: f64, boundary: Vec<[f64; 3]>| Polygon {
         id: 0,
         normal,
         offset,
         area: 0.0,
+        boundary_kinds: vec![VertexKind::Inside; boundary.len()],
         boundary,
         holes: Vec::new(),
+        hole_kinds: Vec::new(),
         pixel_count: 0,
         inlier_ratio: 1.0,
         rms: 0.0,
@@ -428,15 +474,81 @@ fn a_polygon_is_cut_at_a_neighbour_plane_that_bounds_its_points_but_not_at_one_i
     let riser_points = grid(0.0, 0.15, &|z, y| [0.28, y, z]);
     let mut polygons = vec![polygon([0.0, 0.0, 1.0], 0.0, rect(0.0, 0.30)), riser.clone()];
     let tread_points = grid(0.0, 0.28, &|x, y| [x, y, 0.0]);
-    trim_at_neighbour_planes(&mut polygons, &[tread_points, riser_points.clone()], 0.01);
+    let meet = |_: usize, _: usize| true;
+    trim_at_neighbour_planes(&mut polygons, &[tread_points, riser_points.clone()], meet, 0.01);
     let max_x = polygons[0].boundary.iter().map(|v| v[0]).fold(f64::MIN, f64::max);
     assert!((max_x - 0.28).abs() < 1e-9, "the tread ends at the riser's plane, not at {max_x}");
+    // The vertices on the cut say so, and name the riser; the others are as they were.
+    for (v, kind) in polygons[0].boundary.iter().zip(&polygons[0].boundary_kinds) {
+        let want = if v[0] == max_x { VertexKind::Cut { neighbour: Some(1) } } else { VertexKind::Inside };
+        assert_eq!(*kind, want, "vertex {v:?}");
+    }
+    assert_eq!(polygons[0].boundary_kinds.len(), polygons[0].boundary.len());
     // A floor with points on both sides of a box face's plane: the plane does not bound it.
     let mut polygons = vec![polygon([0.0, 0.0, 1.0], 0.0, rect(0.0, 0.52)), riser];
     let floor_points = grid(0.0, 0.5, &|x, y| [x, y, 0.0]);
-    trim_at_neighbour_planes(&mut polygons, &[floor_points, riser_points], 0.01);
+    trim_at_neighbour_planes(&mut polygons, &[floor_points, riser_points], meet, 0.01);
     let max_x = polygons[0].boundary.iter().map(|v| v[0]).fold(f64::MIN, f64::max);
     assert_eq!(max_x, 0.52, "the floor is left whole");
+    // Two boxes side by side, 1 cm apart. Box A's top (z = 0.25, points up to x = 0.30),
+    // seen at a grazing angle, has an outline overshooting to x = 0.315; box B's side
+    // facing it is the plane x = 0.31. A's points all lie on one side of that plane and its
+    // outline crosses it, but the two faces do not meet: nothing is cut.
+    let top = vec![[0.0, 0.0, 0.25], [0.315, 0.0, 0.25], [0.315, 1.0, 0.25], [0.0, 1.0, 0.25]];
+    let side = vec![[0.31, 0.0, 0.0], [0.31, 1.0, 0.0], [0.31, 1.0, 0.2], [0.31, 0.0, 0.2]];
+    let boxes = vec![polygon([0.0, 0.0, 1.0], -0.25, top), polygon([-1.0, 0.0, 0.0], 0.31, side)];
+    let points = [grid(0.0, 0.30, &|x, y| [x, y, 0.25]), grid(0.0, 0.2, &|z, y| [0.31, y, z])];
+    let mut apart = boxes.clone();
+    trim_at_neighbour_planes(&mut apart, &points, |_, _| false, 0.01);
+    assert_eq!(apart, boxes, "faces that do not meet are left as they are");
+    // Had they met (the rule before creases were asked for), A's top was cut there.
+    let mut meeting = boxes.clone();
+    trim_at_neighbour_planes(&mut meeting, &points, meet, 0.01);
+    let max_x = meeting[0].boundary.iter().map(|v| v[0]).fold(f64::MIN, f64::max);
+    assert!((max_x - 0.31).abs() < 1e-9, "{max_x}");
+}
+
+#[test]
+fn regions_meet_along_a_crease_not_across_a_wide_gap_a_depth_step_or_a_corner() {
+    use polymap::extract::segment::Segmentation;
+    // Region A: columns 0..15, region B: from column 15 + gap on, both 20 rows; `far` puts
+    // B that much further from the camera than A's 1 m.
+    let meet = |gap: usize, far: f32| {
+        let (w, h) = (40, 20);
+        let boundary = Grid {
+            width: w,
+            height: h,
+            data: (0..w * h).map(|i| u8::from((15..15 + gap).contains(&(i % w)))).collect(),
+        };
+        let seg = Segmentation::components(&boundary, 10);
+        assert_eq!(seg.pixels.len(), if gap == 0 { 1 } else { 2 });
+        let depth =
+            Grid { width: w, height: h, data: (0..w * h).map(|i| if i % w < 15 { 1.0 } else { 1.0 + far }).collect() };
+        seg.creases(&depth, 0.03).meet(1, 2)
+    };
+    assert!(meet(1, 0.0), "a one-pixel edge line between two faces");
+    assert!(meet(4, 0.0), "the widest band growth may leave");
+    assert!(!meet(6, 0.0), "too far apart in the image");
+    assert!(meet(3, 0.05), "a crease seen at an angle: 5 cm over 4 pixels is no depth step");
+    assert!(!meet(3, 0.5), "an occluding edge: half a metre further is a depth step");
+    // Two blocks touching at a corner only.
+    let (w, h) = (20, 20);
+    let block = |i: usize| {
+        let (u, v) = (i % w, i / w);
+        (u < 10 && v < 10) || (u >= 10 && v >= 10)
+    };
+    let boundary = Grid { width: w, height: h, data: (0..w * h).map(|i| u8::from(!block(i))).collect() };
+    let seg = Segmentation::components(&boundary, 10);
+    // 8-connected components join at the corner: split them by hand.
+    let mut labels = seg.labels.clone();
+    for (i, l) in labels.data.iter_mut().enumerate() {
+        if *l != 0 {
+            *l = if i % w < 10 { 1 } else { 2 };
+        }
+    }
+    let seg = Segmentation { labels, pixels: vec![Vec::new(), Vec::new()] };
+    let depth = Grid { width: w, height: h, data: vec![1.0; w * h] };
+    assert!(!seg.creases(&depth, 0.03).meet(1, 2), "a corner is no crease");
 }
 
 #[test]

@@ -4,7 +4,7 @@
 use geo::{Area, BooleanOps, Coord, LineString, Polygon as Shape};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use polymap::config::MapConfig;
-use polymap::extract::Polygon;
+use polymap::extract::{Polygon, VertexKind};
 use polymap::map::convex::convex_pieces;
 use polymap::map::drift::DriftFilter;
 use polymap::map::geometry::top_down;
@@ -33,6 +33,8 @@ fn seen(xy: &[[f64; 2]], z: f64, pose: &Isometry3<f64>) -> Polygon {
         area: 0.0,
         boundary: xy.iter().map(|&[x, y]| [x, y, z]).collect(),
         holes: vec![],
+        boundary_kinds: vec![VertexKind::Inside; xy.len()],
+        hole_kinds: vec![],
         pixel_count: 1000,
         inlier_ratio: 1.0,
         rms: 0.001,
@@ -83,6 +85,7 @@ fn mapped(xy: &[[f64; 2]], holes: &[Vec<[f64; 2]>], z: f64) -> polymap::map::Map
     let mut map = PolygonMap::new(&MapConfig::default());
     let mut p = seen(xy, z, &pose);
     p.holes = holes.iter().map(|h| seen(h, z, &pose).boundary).collect();
+    p.hole_kinds = holes.iter().map(|h| vec![VertexKind::Inside; h.len()]).collect();
     map.update(&[p.clone()], &pose, &intr, None);
     map.update(&[p], &pose, &intr, None);
     let snap = map.snapshot();
@@ -209,37 +212,68 @@ fn what_one_frame_saw_stays_until_a_later_frame_looks_there_and_does_not_see_it(
 }
 
 #[test]
-fn outlines_are_pulled_in_for_good_except_along_edges_cut_at_a_neighbour_plane() {
+fn outlines_are_pulled_in_by_what_their_vertices_lie_on_and_not_at_all_along_a_cut() {
     // An L515-like focal length: a pixel spans centimetres on the tread at this distance.
     let (pose, _) = camera();
     let intr = Intrinsics::L515_320X240;
-    let to_camera = |p: Polygon| p.transformed(&pose.inverse());
-    let tread = |x0: f64, x1: f64| seen(&rect(x0, 0.0, x1, 1.0), 0.15, &pose);
-    // The riser behind the tread, as the extractor leaves it: the tread's back edge was cut
-    // at this plane, so its back vertices lie on it.
-    let riser = to_camera(Polygon {
+    // The tread's back edge (vertices 1 and 2, x = 0.28) of the given kind, the rest Inside.
+    let tread = |x0: f64, x1: f64, back: VertexKind| {
+        let mut p = seen(&rect(x0, 0.0, x1, 1.0), 0.15, &pose);
+        p.boundary_kinds[1] = back;
+        p.boundary_kinds[2] = back;
+        p
+    };
+    // The riser behind the tread: its plane meets the tread's back edge, whatever its kinds.
+    let riser = Polygon {
         id: 1,
         normal: [-1.0, 0.0, 0.0],
         offset: 0.28,
         area: 0.15,
         boundary: vec![[0.28, 0.0, 0.15], [0.28, 1.0, 0.15], [0.28, 1.0, 0.3], [0.28, 0.0, 0.3]],
         holes: vec![],
+        boundary_kinds: vec![VertexKind::Inside; 4],
+        hole_kinds: vec![],
         pixel_count: 1000,
         inlier_ratio: 1.0,
         rms: 0.001,
-    });
-    let mut map = PolygonMap::new(&MapConfig::default());
-    for _ in 0..2 {
-        map.update(&[tread(0.0, 0.28), riser.clone()], &pose, &intr, None);
     }
-    // A last, small view of the tread's middle, so the map shows what it keeps for good.
-    map.update(&[tread(0.1, 0.2), riser.clone()], &pose, &intr, None);
-    let snap = map.snapshot();
-    let kept = snap.polygons.iter().find(|p| p.normal[2] > 0.9).expect("the tread is mapped");
-    let xs = kept.boundary.iter().map(|v| v[0]);
-    let (x0, x1) = xs.fold((f64::MAX, f64::MIN), |(a, b), x| (a.min(x), b.max(x)));
-    assert!((x1 - 0.28).abs() < 1e-6, "the cut back edge stays at the riser: x {x1}");
-    assert!(x0 > 0.005, "the front edge, a pixel outline, is pulled in: x {x0}");
+    .transformed(&pose.inverse());
+    let back_edge_kept = |back: VertexKind| {
+        let mut map = PolygonMap::new(&MapConfig::default());
+        for _ in 0..2 {
+            map.update(&[tread(0.0, 0.28, back), riser.clone()], &pose, &intr, None);
+        }
+        // A last, small view of the tread's middle, so the map shows what it keeps for good.
+        map.update(&[tread(0.1, 0.2, VertexKind::Inside), riser.clone()], &pose, &intr, None);
+        let snap = map.snapshot();
+        let kept = snap.polygons.iter().find(|p| p.normal[2] > 0.9).expect("the tread is mapped");
+        let xs = kept.boundary.iter().map(|v| v[0]);
+        let (x0, x1) = xs.fold((f64::MAX, f64::MIN), |(a, b), x| (a.min(x), b.max(x)));
+        assert!(x0 > 0.005, "the front edge, a pixel outline, is pulled in: x {x0}");
+        x1
+    };
+    let cut = back_edge_kept(VertexKind::Cut { neighbour: Some(1) });
+    assert!((cut - 0.28).abs() < 1e-6, "the cut back edge stays at the riser: x {cut}");
+    // The same vertices on the riser's plane, said to be a pixel outline, are pulled in:
+    // the kinds decide, not where the vertices happen to lie.
+    let inside = back_edge_kept(VertexKind::Inside);
+    assert!(inside < 0.28 - 0.005, "a pixel outline is pulled in: x {inside}");
+    // Along the image's border, further.
+    let border = back_edge_kept(VertexKind::ImageBorder);
+    assert!(border < inside - 0.005, "the view's edge is pulled in further: x {border} vs {inside}");
+}
+
+#[test]
+fn a_polygon_whose_vertex_kinds_do_not_match_its_vertices_is_refused_with_why() {
+    let (pose, intr) = camera();
+    let mut map = PolygonMap::new(&MapConfig::default());
+    let mut p = seen(&rect(0.0, 0.0, 1.0, 1.0), 0.0, &pose);
+    p.boundary_kinds.pop();
+    let update = map.update(&[p], &pose, &intr, None);
+    assert!(map.is_empty());
+    assert_eq!(update.rejected.len(), 1);
+    assert!(update.rejected[0].contains("3 kinds for the outline's 4 vertices"), "{:?}", update.rejected);
+    assert_eq!(map.counters.rejected, 1);
 }
 
 #[test]
@@ -328,6 +362,8 @@ fn labels_name_a_staircase() {
         area: 0.15,
         boundary: vec![[0.0, 0.5, 0.0], [0.0, -0.5, 0.0], [0.0, -0.5, 0.15], [0.0, 0.5, 0.15]],
         holes: vec![],
+        boundary_kinds: vec![VertexKind::Inside; 4],
+        hole_kinds: vec![],
         pixel_count: 500,
         inlier_ratio: 1.0,
         rms: 0.001,

@@ -14,8 +14,9 @@
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
+use super::Grid;
 use super::cpu::ransac::{PlaneFit, PointBatch, refit};
-use super::{Grid, flood, label_components};
+use crate::grid::{flood, label_components};
 use crate::types::Intrinsics;
 
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
@@ -212,6 +213,76 @@ impl Segmentation {
         }
         // Each wave appended a sorted run: the stable sort merges runs in linear time.
         self.pixels.iter_mut().for_each(|p| p.sort());
+    }
+}
+
+/// Two regions meet along a crease when at least this many rows and columns step from
+/// one to the other: fewer is a corner touch or a stray pixel.
+const MIN_CREASE_STEPS: u32 = 3;
+/// Unlabelled pixels a row or a column may cross from one region to a region it meets:
+/// the band growth left between them (mixed pixels, a dropout).
+const MAX_CREASE_GAP_PX: usize = 4;
+
+/// Which regions meet along a crease of the surface: where a row or a column steps from
+/// one region to the other (across at most `MAX_CREASE_GAP_PX` unlabelled pixels) with no
+/// depth step between the two pixels. Regions side by side across a depth step (a box's
+/// top before the floor behind it) or apart in the image do not meet.
+pub struct Creases {
+    /// (a, b) with a < b (labels), and the number of steps between them; sorted.
+    steps: Vec<((u32, u32), u32)>,
+}
+
+impl Creases {
+    /// Whether the regions labelled `a` and `b` meet.
+    pub fn meet(&self, a: u32, b: u32) -> bool {
+        let key = (a.min(b), a.max(b));
+        self.steps.binary_search_by_key(&key, |&(k, _)| k).is_ok_and(|i| self.steps[i].1 >= MIN_CREASE_STEPS)
+    }
+}
+
+impl Segmentation {
+    /// The creases between regions; `ratio` is the depth step, relative to the depth, that
+    /// parts two neighbouring pixels (as the boundary map's, per pixel of distance).
+    pub fn creases(&self, depth: &Grid<f32>, ratio: f32) -> Creases {
+        let (w, h) = (self.labels.width, self.labels.height);
+        let (l, z) = (&self.labels.data, &depth.data);
+        let mut steps = Vec::new();
+        // From labelled pixel i to labelled pixel j, `px` pixels apart, nothing labelled between.
+        let mut step = |i: usize, j: usize, px: usize| {
+            let (a, b, zi, zj) = (l[i], l[j], z[i], z[j]);
+            if a != b && zi > 0.0 && zj > 0.0 && (zi - zj).abs() <= ratio * px as f32 * zi.min(zj) {
+                steps.push((a.min(b), a.max(b)));
+            }
+        };
+        // The nearest labelled pixel before j, `stride` apart (1: along the row, w: up the
+        // column), at most MAX_CREASE_GAP_PX + 1 steps back and `room` steps at most.
+        let nearest = |j: usize, stride: usize, room: usize| {
+            (1..=room.min(MAX_CREASE_GAP_PX + 1)).map(|k| (j - k * stride, k)).find(|&(i, _)| l[i] != 0)
+        };
+        for v in 0..h {
+            for u in 0..w {
+                let j = v * w + u;
+                let x = l[j];
+                // Most labelled pixels have the same label left and above: nothing to do.
+                if x == 0 || ((u == 0 || l[j - 1] == x) && (v == 0 || l[j - w] == x)) {
+                    continue;
+                }
+                for (stride, room) in [(1, u), (w, v)] {
+                    if let Some((i, px)) = nearest(j, stride, room) {
+                        step(i, j, px);
+                    }
+                }
+            }
+        }
+        steps.sort_unstable();
+        let mut counted: Vec<((u32, u32), u32)> = Vec::new();
+        for pair in steps {
+            match counted.last_mut() {
+                Some((p, n)) if *p == pair => *n += 1,
+                _ => counted.push((pair, 1)),
+            }
+        }
+        Creases { steps: counted }
     }
 }
 

@@ -4,14 +4,18 @@
 //! edge between two planes that outline is off by a pixel or two (the edge band, the
 //! growth back over it, half a pixel of outline), and on a tread seen at a grazing
 //! angle one pixel spans centimetres. The edge itself is known far better: it is where
-//! the two fitted planes meet. So a polygon whose points all lie on one side of another
-//! polygon's plane, give or take the inlier distance, is cut at that plane; where its
-//! points lie on both sides (a floor around a box standing on it), the other plane
-//! does not bound it and nothing is cut.
+//! the two fitted planes meet. So a polygon that meets another along a crease (their
+//! regions touch with no depth step, segment::Creases) and whose points all lie on one
+//! side of that polygon's plane, give or take the inlier distance, is cut at that plane.
+//! Where its points lie on both sides (a floor around a box standing on it), the other
+//! plane does not bound it; where the two do not meet (faces of two blocks side by
+//! side), the plane says nothing of where it ends: nothing is cut. The vertices made on
+//! a cut say so ([`VertexKind::Cut`]): the map keeps them where they are.
 
 use nalgebra::Vector3;
 
-use super::Polygon;
+use super::{Polygon, VertexKind};
+use crate::ring::clip_tagged_ring;
 
 /// Planes closer to parallel than this never bound each other (cos of 10 deg).
 const PARALLEL_COS: f64 = 0.985;
@@ -20,9 +24,15 @@ const PARALLEL_COS: f64 = 0.985;
 /// plane still bounds it (noise and the odd mixed pixel).
 const STRAY_SHARE: f64 = 0.005;
 
-/// Cuts every polygon at the planes of the others that bound it. `points[k]` are the
-/// camera-frame points of polygon k's region; `dist` is the inlier distance, m.
-pub fn trim_at_neighbour_planes(polygons: &mut [Polygon], points: &[Vec<[f32; 3]>], dist: f64) {
+/// Cuts every polygon at the planes of the others that meet it and bound it.
+/// `points[k]` are the camera-frame points of polygon k's region, `meet(a, b)` whether
+/// polygons a and b meet along a crease; `dist` is the inlier distance, m.
+pub fn trim_at_neighbour_planes(
+    polygons: &mut [Polygon],
+    points: &[Vec<[f32; 3]>],
+    meet: impl Fn(usize, usize) -> bool,
+    dist: f64,
+) {
     let planes: Vec<(Vector3<f64>, f64)> = polygons.iter().map(|p| (Vector3::from(p.normal), p.offset)).collect();
     for (a, polygon) in polygons.iter_mut().enumerate() {
         let own = planes[a].0;
@@ -36,6 +46,10 @@ pub fn trim_at_neighbour_planes(polygons: &mut [Polygon], points: &[Vec<[f32; 3]
             if polygon.boundary.iter().all(|v| side * f(v) >= 0.0) {
                 continue;
             }
+            if !meet(a, b) {
+                tracing::debug!("polygon {a} crosses the plane of polygon {b}, which it does not meet: not cut");
+                continue;
+            }
             let pts = &points[a];
             let strays = pts.iter().filter(|p| side * f(&p.map(f64::from)) < -dist).count();
             if pts.is_empty() || strays as f64 > STRAY_SHARE * pts.len() as f64 {
@@ -47,31 +61,19 @@ pub fn trim_at_neighbour_planes(polygons: &mut [Polygon], points: &[Vec<[f32; 3]
             }
             tracing::debug!("polygon {a} cut at the plane of polygon {b}");
             let keep = |p: &[f64; 3]| side * f(p);
-            let outer = clip_ring(&polygon.boundary, keep);
+            let cut = VertexKind::Cut { neighbour: Some(b as u32) };
+            let (outer, outer_kinds) = clip_tagged_ring(&polygon.boundary, &polygon.boundary_kinds, keep, cut);
             if outer.len() < 3 {
                 continue;
             }
-            polygon.boundary = outer;
-            polygon.holes = polygon.holes.iter().map(|h| clip_ring(h, keep)).filter(|h| h.len() >= 3).collect();
+            (polygon.boundary, polygon.boundary_kinds) = (outer, outer_kinds);
+            (polygon.holes, polygon.hole_kinds) = polygon
+                .holes
+                .iter()
+                .zip(&polygon.hole_kinds)
+                .map(|(h, k)| clip_tagged_ring(h, k, keep, cut))
+                .filter(|(h, _)| h.len() >= 3)
+                .unzip();
         }
     }
-}
-
-/// The part of a ring where `f` >= 0 (Sutherland-Hodgman against one plane; the ring
-/// may be non-convex, a cut across it leaves a ring that runs along the cut).
-pub fn clip_ring(ring: &[[f64; 3]], f: impl Fn(&[f64; 3]) -> f64) -> Vec<[f64; 3]> {
-    let mut out = Vec::with_capacity(ring.len() + 2);
-    for i in 0..ring.len() {
-        let (a, b) = (ring[i], ring[(i + 1) % ring.len()]);
-        let (fa, fb) = (f(&a), f(&b));
-        if fa >= 0.0 {
-            out.push(a);
-        }
-        if (fa >= 0.0) != (fb >= 0.0) {
-            let t = fa / (fa - fb);
-            out.push([a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]), a[2] + t * (b[2] - a[2])]);
-        }
-    }
-    out.dedup();
-    out
 }

@@ -8,7 +8,7 @@ use nalgebra::{Isometry3, Matrix3, SymmetricEigen, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::extract::contours::offset_vertices;
-use crate::extract::trim::clip_ring;
+use crate::ring::clip_ring;
 use crate::types::Intrinsics;
 
 /// A plane n . p + d = 0 with unit n.

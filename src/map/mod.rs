@@ -24,7 +24,7 @@ use nalgebra::{Isometry3, Point3, Translation3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::config::MapConfig;
-use crate::extract::{Grid, Polygon};
+use crate::extract::{Grid, Polygon, VertexKind};
 use crate::types::Intrinsics;
 use drift::DriftFilter;
 use geometry::{Moments, Plane, PlaneFrame, ViewPyramid};
@@ -400,28 +400,23 @@ impl PolygonMap {
         polygons
             .iter()
             .map(|p| {
-                // A vertex on the plane of another polygon of the frame lies on an edge the
-                // extractor cut there (extract::trim), known to a millimetre: it stays put.
-                let on_cut = |v: &[f64; 3]| {
-                    polygons.iter().any(|q| {
-                        !std::ptr::eq(*q, *p)
-                            && (Vector3::from(q.normal).dot(&Vector3::from(*v)) + q.offset).abs() < ON_CUT_M
-                    })
-                };
-                let erode_at = |ring: &[[f64; 3]]| -> Vec<f64> {
+                // How far each vertex is pulled in follows from what the extractor says it
+                // lies on: a cut at a neighbour's plane is exact and stays put.
+                let erode_at = |ring: &[[f64; 3]], kinds: &[VertexKind]| -> Vec<f64> {
                     ring.iter()
-                        .map(|v| {
-                            if on_cut(v) {
-                                0.0
-                            } else if at_image_border(v, intrinsics) {
-                                (VIEW_EDGE_UNCERTAINTY_PX * footprint(v, p, intrinsics)).min(MAX_ERODE_M)
-                            } else {
-                                (OUTLINE_UNCERTAINTY_PX * footprint(v, p, intrinsics)).min(MAX_ERODE_M)
-                            }
+                        .zip(kinds)
+                        .map(|(v, kind)| {
+                            let px = match kind {
+                                VertexKind::Cut { .. } => return 0.0,
+                                VertexKind::ImageBorder => VIEW_EDGE_UNCERTAINTY_PX,
+                                VertexKind::Inside => OUTLINE_UNCERTAINTY_PX,
+                            };
+                            (px * footprint(v, p, intrinsics)).min(MAX_ERODE_M)
                         })
                         .collect()
                 };
-                let (erode, erode_holes) = (erode_at(&p.boundary), p.holes.iter().map(|h| erode_at(h)).collect());
+                let erode = erode_at(&p.boundary, &p.boundary_kinds);
+                let erode_holes = p.holes.iter().zip(&p.hole_kinds).map(|(h, k)| erode_at(h, k)).collect();
                 let w = p.transformed(&t);
                 let mut normal = Vector3::from(w.normal);
                 let mut offset = w.offset;
@@ -619,6 +614,8 @@ impl PolygonMap {
                 area: p.area,
                 boundary: p.boundary.clone(),
                 holes: p.holes.clone(),
+                boundary_kinds: vec![VertexKind::Inside; p.boundary.len()],
+                hole_kinds: p.holes.iter().map(|h| vec![VertexKind::Inside; h.len()]).collect(),
                 pixel_count: 0,
                 inlier_ratio: 1.0,
                 rms: 0.0,
@@ -705,26 +702,12 @@ const OUTLINE_UNCERTAINTY_PX: f64 = 1.5;
 /// stop their region growing over the next surface's first centimetre, seen at the
 /// most grazing angle of the frame. Pulled in further; other views see past it.
 const VIEW_EDGE_UNCERTAINTY_PX: f64 = 4.0;
-/// An outline vertex within this many pixels of the image's border is on it.
-const VIEW_EDGE_PX: f64 = 2.0;
 /// A frame looked at what lies this many pixels inside its image's border: its outlines
-/// along the border are pulled in by less, so missing there is not having looked.
-const LOOKED_MARGIN_PX: f64 = VIEW_EDGE_PX + VIEW_EDGE_UNCERTAINTY_PX + 2.0;
-/// A vertex this near another plane of its frame lies on a cut (the cuts are exact to
-/// rounding), m.
-const ON_CUT_M: f64 = 1e-7;
+/// along the border (extract::BORDER_PX) are pulled in by less, so missing there is not
+/// having looked.
+const LOOKED_MARGIN_PX: f64 = crate::extract::polygon::BORDER_PX as f64 + VIEW_EDGE_UNCERTAINTY_PX + 2.0;
 /// The most an outline is pulled in, m.
 const MAX_ERODE_M: f64 = 0.05;
-
-/// Whether a camera-frame vertex projects onto the image's border band.
-fn at_image_border(v: &[f64; 3], intr: &Intrinsics) -> bool {
-    if v[2] <= 0.0 {
-        return false;
-    }
-    let (u, r) = (intr.fx * v[0] / v[2] + intr.cx, intr.fy * v[1] / v[2] + intr.cy);
-    let (w, h) = (intr.width as f64, intr.height as f64);
-    u < VIEW_EDGE_PX || r < VIEW_EDGE_PX || u > w - 1.0 - VIEW_EDGE_PX || r > h - 1.0 - VIEW_EDGE_PX
-}
 
 /// Size of one pixel on the polygon's plane at its vertex `v` (camera frame), m: range
 /// over focal length, stretched by the obliquity of the view there.
@@ -751,6 +734,18 @@ pub fn polygon_problem(p: &Polygon) -> Option<String> {
     }
     if p.holes.iter().any(|h| h.len() < 3) {
         return Some("a hole has under 3 vertices".into());
+    }
+    if p.boundary_kinds.len() != p.boundary.len()
+        || p.hole_kinds.len() != p.holes.len()
+        || p.holes.iter().zip(&p.hole_kinds).any(|(h, k)| h.len() != k.len())
+    {
+        return Some(format!(
+            "vertex kinds do not match the vertices ({} kinds for the outline's {} vertices, {} rings of kinds for {} holes)",
+            p.boundary_kinds.len(),
+            p.boundary.len(),
+            p.hole_kinds.len(),
+            p.holes.len()
+        ));
     }
     // A degenerate outline (a line, a bowtie whose lobes cancel) has no plane frame to hold it.
     let area = Moments::of_polygon(&p.boundary, &p.holes, &n).weight;

@@ -10,7 +10,7 @@
 use rayon::prelude::*;
 
 use super::{ROWS_PER_TASK, widest_simd};
-use crate::extract::{Grid, label_components};
+use crate::grid::{Grid, label_components};
 
 /// Gradient of the normal field: (magnitude, NMS sector 0..4) per pixel; sector 4 marks
 /// a pixel whose 3x3 neighbourhood lacks a normal, or on the image's border (magnitude 0
