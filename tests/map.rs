@@ -4,7 +4,7 @@
 use geo::{Area, BooleanOps, Coord, LineString, Polygon as Shape};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use polymap::config::MapConfig;
-use polymap::extract::{Polygon, VertexKind};
+use polymap::extract::{Grid, Polygon, VertexKind};
 use polymap::map::convex::convex_pieces;
 use polymap::map::drift::DriftFilter;
 use polymap::map::geometry::top_down;
@@ -589,4 +589,33 @@ fn a_view_pyramid_meets_a_plane_in_what_the_image_shows_of_it() {
     // A ceiling over the camera is behind it: not in view.
     let ceiling = PlaneFrame::new(Vector3::new(0.0, 0.0, 2.0), Vector3::z());
     assert!(ViewPyramid::new(&pose, &intr, 0.0).on_plane(&ceiling).is_none());
+}
+
+#[test]
+fn clearing_reaches_the_corners_of_the_view_and_nothing_outside_it() {
+    let (pose, _) = camera();
+    let intr = Intrinsics::L515_320X240;
+    // Where pixel (u, v)'s ray meets the floor.
+    let floor_at = |u: f64, v: f64| {
+        let ray = pose.rotation * intr.ray(u, v);
+        let p = pose.translation.vector + ray * (-pose.translation.vector.z / ray.z);
+        [p.x, p.y]
+    };
+    let tile = |[x, y]: [f64; 2], half: f64| seen(&rect(x - half, y - half, x + half, y + half), 0.0, &pose);
+    let centre = tile(floor_at(160.0, 120.0), 0.2);
+    let corner = tile(floor_at(6.0, 6.0), 0.03);
+    let behind = tile([-10.0, 0.0], 0.2);
+    let mut map = PolygonMap::new(&MapConfig::default());
+    map.update(&[centre, corner, behind], &pose, &intr, None);
+    assert_eq!(map.len(), 3);
+    // The depth image sees 4 m further than the floor everywhere: through the floor tiles.
+    let depth = Grid { width: 320, height: 240, data: vec![8.0f32; 320 * 240] };
+    let mut removed = Vec::new();
+    for _ in 0..MapConfig::default().clear_after_frames {
+        removed.extend(map.update(&[], &pose, &intr, Some(&depth)).removed);
+    }
+    removed.sort_unstable();
+    assert_eq!(removed, vec![1, 2], "the tiles in view, the one at the image's corner too, are cleared");
+    assert_eq!(map.ids(), vec![3], "the one behind the camera is left alone");
+    assert_eq!(map.counters.cleared, 2);
 }

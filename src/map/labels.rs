@@ -8,6 +8,8 @@
 //! surface off the step grid. A vertical polygon no taller
 //! than a step, whose top is at a level, is that step's riser; any other is a wall.
 
+use std::collections::BTreeSet;
+
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -28,7 +30,7 @@ impl Label {
 }
 
 /// What labelling needs of a polygon.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Facts {
     /// Angle of the plane to horizontal, degrees.
     pub tilt_deg: f64,
@@ -61,16 +63,18 @@ const STEP_RANGE: [f64; 2] = [0.05, 0.30];
 const LANDING_DEPTH_RATIO: f64 = 1.5;
 
 /// Labels and steps of `facts`, in order, and the stair if there is one.
+/// `horizontal_heights` are the heights of the horizontal facts (tilt up to
+/// `horizontal_max_tilt_deg`), ascending: the map keeps them sorted as its polygons change,
+/// so labelling a large map does not sort it every frame.
 pub fn label(
     facts: &[Facts],
+    horizontal_heights: impl IntoIterator<Item = f64>,
     horizontal_max_tilt_deg: f64,
     vertical_min_tilt_deg: f64,
 ) -> (Vec<(Label, Option<u32>)>, Option<Stair>) {
     let horizontal: Vec<usize> = (0..facts.len()).filter(|&i| facts[i].tilt_deg <= horizontal_max_tilt_deg).collect();
-    let mut heights: Vec<f64> = horizontal.iter().map(|&i| facts[i].height).collect();
-    heights.sort_by(f64::total_cmp);
     let mut levels: Vec<f64> = Vec::new();
-    for h in heights {
+    for h in horizontal_heights {
         match levels.last() {
             Some(&l) if h - l < LEVEL_GAP => {}
             _ => levels.push(h),
@@ -150,4 +154,89 @@ fn median(mut v: Vec<f64>) -> Option<f64> {
     v.sort_by(f64::total_cmp);
     let n = v.len();
     Some(if n % 2 == 1 { v[n / 2] } else { (v[n / 2 - 1] + v[n / 2]) / 2.0 })
+}
+
+/// A polygon's label and, for treads, landings and risers, its step.
+pub type Labelled = (Label, Option<u32>);
+
+/// The map's polygons as labelling sees them, kept up to date as they change: their facts
+/// in id order (as the map's scan would meet them), their labels, and the heights of the
+/// horizontal ones sorted. Relabelling the map then reads three flat arrays and touches
+/// only the polygons whose label changed, instead of walking every map polygon.
+#[derive(Clone, Debug, Default)]
+pub struct Table {
+    ids: Vec<u64>,
+    facts: Vec<Facts>,
+    labels: Vec<Labelled>,
+    heights: BTreeSet<(Height, u64)>,
+    horizontal_max_tilt_deg: f64,
+    vertical_min_tilt_deg: f64,
+}
+
+impl Table {
+    pub fn new(horizontal_max_tilt_deg: f64, vertical_min_tilt_deg: f64) -> Table {
+        Table { horizontal_max_tilt_deg, vertical_min_tilt_deg, ..Table::default() }
+    }
+
+    /// Polygon `id` has these facts now (new ones start as a slope without step).
+    pub fn set(&mut self, id: u64, facts: Facts) {
+        let k = match self.ids.binary_search(&id) {
+            Ok(k) => {
+                self.heights.remove(&(Height(self.facts[k].height), id));
+                self.facts[k] = facts;
+                k
+            }
+            Err(k) => {
+                self.ids.insert(k, id);
+                self.facts.insert(k, facts);
+                self.labels.insert(k, (Label::Slope, None));
+                k
+            }
+        };
+        if self.facts[k].tilt_deg <= self.horizontal_max_tilt_deg {
+            self.heights.insert((Height(facts.height), id));
+        }
+    }
+
+    pub fn remove(&mut self, id: u64) {
+        if let Ok(k) = self.ids.binary_search(&id) {
+            self.heights.remove(&(Height(self.facts[k].height), id));
+            self.ids.remove(k);
+            self.facts.remove(k);
+            self.labels.remove(k);
+        }
+    }
+
+    /// Labels everything again: the polygons whose label or step changed, with their new
+    /// ones, and the stair.
+    pub fn relabel(&mut self) -> (Vec<(u64, Labelled)>, Option<Stair>) {
+        let heights = self.heights.iter().map(|(h, _)| h.0);
+        let (out, stair) = label(&self.facts, heights, self.horizontal_max_tilt_deg, self.vertical_min_tilt_deg);
+        let mut changed = Vec::new();
+        for ((id, old), new) in self.ids.iter().zip(&mut self.labels).zip(out) {
+            if *old != new {
+                *old = new;
+                changed.push((*id, new));
+            }
+        }
+        (changed, stair)
+    }
+}
+
+/// A height with a total order (f64::total_cmp), to keep heights sorted in a set.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Height(pub f64);
+
+impl Eq for Height {}
+
+impl PartialOrd for Height {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Height {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&other.0)
+    }
 }

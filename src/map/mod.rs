@@ -21,6 +21,8 @@ use std::collections::BTreeMap;
 
 use geo::{Area, BooleanOps, Centroid, Contains, Coord, MinimumRotatedRect, Point, Polygon as Shape};
 use nalgebra::{Isometry3, Point3, Translation3, Vector3};
+use rstar::primitives::{GeomWithData, Rectangle};
+use rstar::{AABB, RTree};
 use serde::{Deserialize, Serialize};
 
 use crate::config::MapConfig;
@@ -130,6 +132,8 @@ struct Entry {
     centroid: [f64; 3],
     /// Width of the smallest rectangle enclosing the shape, m (a tread's depth, for labels).
     depth: f64,
+    /// What labelling needs of it.
+    facts: labels::Facts,
     /// Points inside the shape that clearing checks against the depth image.
     samples: Vec<Coord<f64>>,
     /// The planner's view, built when asked for and dropped when the entry changes.
@@ -185,6 +189,11 @@ struct Match {
 pub struct PolygonMap {
     cfg: MapConfig,
     entries: BTreeMap<u64, Entry>,
+    /// Each entry's world box, by id: matching and clearing look up what is near instead
+    /// of scanning the map.
+    index: RTree<Indexed>,
+    /// What labelling needs of every entry, kept as they change.
+    label_table: labels::Table,
     next_id: u64,
     pub drift: DriftFilter,
     /// One more with every frame merged: what a client applied up to.
@@ -211,6 +220,8 @@ impl PolygonMap {
         PolygonMap {
             cfg: cfg.clone(),
             entries: BTreeMap::new(),
+            index: RTree::new(),
+            label_table: labels::Table::new(cfg.horizontal_max_tilt_deg, cfg.vertical_min_tilt_deg),
             next_id: 1,
             drift: DriftFilter::new(cfg.drift_sigma_p, cfg.drift_sigma_m),
             version: 0,
@@ -255,6 +266,27 @@ impl PolygonMap {
         let mut update = MapUpdate::default();
         self.counters.frames += 1;
         self.counters.polygons_in += polygons.len() as u64;
+        let Some(valid) = self.admit(polygons, t_world_camera, &mut update) else { return update };
+        self.version += 1;
+        if self.cfg.drift_filter {
+            update.drift_measured = self.measure_drift(&valid, t_world_camera, intrinsics);
+        }
+        let touched = self.merge_frame(&valid, t_world_camera, intrinsics, &mut update);
+        if let Some(depth_m) = depth_m {
+            self.clear_contradicted(&touched, t_world_camera, depth_m, intrinsics, &mut update);
+        }
+        self.settle(&touched, &mut update);
+        update
+    }
+
+    /// The polygons fit to go in, the others refused in `update` with why; None (the frame
+    /// skipped) when the pose itself is unusable.
+    fn admit<'p>(
+        &mut self,
+        polygons: &'p [Polygon],
+        t_world_camera: &Isometry3<f64>,
+        update: &mut MapUpdate,
+    ) -> Option<Vec<&'p Polygon>> {
         let valid: Vec<&Polygon> = polygons
             .iter()
             .filter(|p| match polygon_problem(p) {
@@ -279,39 +311,53 @@ impl PolygonMap {
         for why in &update.rejected {
             tracing::warn!("map: {why}");
         }
-        if !pose_finite {
-            return update;
-        }
-        self.version += 1;
+        pose_finite.then_some(valid)
+    }
 
-        // Drift: predict, measure on the horizontal matches, correct.
-        if self.cfg.drift_filter {
-            self.drift.predict();
-            let obs = self.observations(&valid, t_world_camera, intrinsics);
-            let (mut weight, mut sum) = (0.0, 0.0);
-            for o in obs.iter().filter(|o| o.horizontal) {
-                for m in self.matches(o) {
-                    if self.entries[&m.id].label.is_horizontal() {
-                        weight += m.area;
-                        sum += m.area * m.dz * self.entries[&m.id].frame.normal.z;
-                    }
+    /// Drift: predicted, measured on the frame's horizontal polygons that match horizontal
+    /// map polygons (area-weighted height difference), corrected. Returns the measurement.
+    fn measure_drift(
+        &mut self,
+        valid: &[&Polygon],
+        t_world_camera: &Isometry3<f64>,
+        intrinsics: &Intrinsics,
+    ) -> Option<f64> {
+        self.drift.predict();
+        let obs = self.observations(valid, t_world_camera, intrinsics);
+        let (mut weight, mut sum) = (0.0, 0.0);
+        for o in obs.iter().filter(|o| o.horizontal) {
+            for m in self.matches(o) {
+                if self.entries[&m.id].label.is_horizontal() {
+                    weight += m.area;
+                    sum += m.area * m.dz * self.entries[&m.id].frame.normal.z;
                 }
             }
-            if weight > 0.0 {
-                let measured = self.drift.z + sum / weight;
-                self.drift.correct(measured);
-                update.drift_measured = Some(measured);
-                tracing::debug!(
-                    "drift measured {:.1} mm over {weight:.3} m^2 -> estimate {:.1} mm",
-                    measured * 1e3,
-                    self.drift.z * 1e3
-                );
-            }
         }
+        if weight <= 0.0 {
+            return None;
+        }
+        let measured = self.drift.z + sum / weight;
+        self.drift.correct(measured);
+        tracing::debug!(
+            "drift measured {:.1} mm over {weight:.3} m^2 -> estimate {:.1} mm",
+            measured * 1e3,
+            self.drift.z * 1e3
+        );
+        Some(measured)
+    }
 
-        // Merge, against the map as it grows within the frame.
+    /// Each polygon, drift taken out, merged into the map polygons it matches (bridged ones
+    /// absorbed into the largest overlap) or added; against the map as it grows within the
+    /// frame. Returns the ids touched.
+    fn merge_frame(
+        &mut self,
+        valid: &[&Polygon],
+        t_world_camera: &Isometry3<f64>,
+        intrinsics: &Intrinsics,
+        update: &mut MapUpdate,
+    ) -> Vec<u64> {
         let mut touched = Vec::new();
-        for o in self.observations(&valid, t_world_camera, intrinsics) {
+        for o in self.observations(valid, t_world_camera, intrinsics) {
             let mut matches = self.matches(&o);
             matches.sort_by(|a, b| b.area.total_cmp(&a.area));
             let id = match matches.first() {
@@ -337,36 +383,52 @@ impl PolygonMap {
         }
         self.counters.added += update.added.len() as u64;
         self.counters.merged += update.changed.len() as u64;
+        touched
+    }
 
-        if let Some(depth_m) = depth_m {
-            let camera = self.corrected(t_world_camera);
-            let cleared: Vec<u64> = self
-                .entries
-                .iter_mut()
-                .filter(|(id, _)| !touched.contains(id))
-                .filter_map(|(&id, e)| match contradiction(e, &camera, depth_m, intrinsics, &self.cfg) {
-                    Some(true) => {
-                        e.misses += 1;
-                        (e.misses >= self.cfg.clear_after_frames).then_some(id)
+    /// Map polygons in view that this frame did not see and whose place the depth image
+    /// contradicts get a miss; `clear_after_frames` misses in a row remove them. Only map
+    /// polygons the view can reach are looked at ([`ViewBox`]), so the cost follows what
+    /// is in view, not the map's size.
+    fn clear_contradicted(
+        &mut self,
+        touched: &[u64],
+        t_world_camera: &Isometry3<f64>,
+        depth_m: &Grid<f32>,
+        intrinsics: &Intrinsics,
+        update: &mut MapUpdate,
+    ) {
+        let camera = self.corrected(t_world_camera);
+        let Some(reach) = ViewBox::new(&camera, depth_m, intrinsics, &self.cfg) else { return };
+        let mut in_view: Vec<u64> = self.index.locate_in_envelope_intersecting(&reach.0).map(|g| g.data).collect();
+        in_view.sort_unstable();
+        let mut cleared = Vec::new();
+        for id in in_view.into_iter().filter(|id| !touched.contains(id)) {
+            let e = self.entries.get_mut(&id).expect("the index holds the entries");
+            match contradiction(e, &camera, depth_m, intrinsics, &self.cfg) {
+                Some(true) => {
+                    e.misses += 1;
+                    if e.misses >= self.cfg.clear_after_frames {
+                        cleared.push(id);
                     }
-                    Some(false) => {
-                        e.misses = 0;
-                        None
-                    }
-                    None => None,
-                })
-                .collect();
-            for id in cleared {
-                tracing::debug!(
-                    "map polygon {id} cleared: contradicted {} frames in a row",
-                    self.cfg.clear_after_frames
-                );
-                self.entries.remove(&id);
-                update.removed.push(id);
-                self.counters.cleared += 1;
+                }
+                Some(false) => e.misses = 0,
+                None => {}
             }
         }
-        for id in &touched {
+        for id in cleared {
+            tracing::debug!("map polygon {id} cleared: contradicted {} frames in a row", self.cfg.clear_after_frames);
+            self.remove(id);
+            update.removed.push(id);
+            self.counters.cleared += 1;
+        }
+    }
+
+    /// The frame's bookkeeping: what it touched has no misses, the lists of `update` are
+    /// sorted and hold each id once (what was added or changed and then removed is only
+    /// removed), labels are redone.
+    fn settle(&mut self, touched: &[u64], update: &mut MapUpdate) {
+        for id in touched {
             if let Some(e) = self.entries.get_mut(id) {
                 e.misses = 0;
             }
@@ -378,13 +440,11 @@ impl PolygonMap {
         update.changed.sort_unstable();
         update.changed.dedup();
         self.counters.removed += update.removed.len() as u64;
-
         for id in self.relabel() {
             if !update.added.contains(&id) && !update.changed.contains(&id) {
                 update.changed.push(id);
             }
         }
-        update
     }
 
     /// The frame's polygons in the world, drift taken out.
@@ -445,9 +505,15 @@ impl PolygonMap {
     fn matches(&self, o: &Observation) -> Vec<Match> {
         let cos_n = self.cfg.merge_normal_tolerance_deg.to_radians().cos();
         let tol = self.cfg.merge_height_tolerance_m;
+        let (lo, hi) = (o.aabb[0].map(|v| v - tol), o.aabb[1].map(|v| v + tol));
+        let mut near: Vec<u64> =
+            self.index.locate_in_envelope_intersecting(&AABB::from_corners(lo, hi)).map(|g| g.data).collect();
+        // In id order, as a scan of the map would meet them: ties of overlap keep that order.
+        near.sort_unstable();
         let mut out = Vec::new();
-        for (&id, e) in &self.entries {
-            if !aabb_overlap(&o.aabb, &e.aabb, tol) || o.plane.normal.dot(&e.plane.normal).abs() < cos_n {
+        for id in near {
+            let e = &self.entries[&id];
+            if o.plane.normal.dot(&e.plane.normal).abs() < cos_n {
                 continue;
             }
             let shape = e.frame.shape(&o.boundary, &o.holes);
@@ -488,6 +554,7 @@ impl PolygonMap {
             area: 0.0,
             centroid: [0.0; 3],
             depth: 0.0,
+            facts: labels::Facts::default(),
             samples: Vec::new(),
             published: None,
             seen: o.shape_in(&frame),
@@ -496,11 +563,13 @@ impl PolygonMap {
         };
         refresh(&mut e);
         self.entries.insert(id, e);
+        self.file(id);
     }
 
     /// Unions observation `o` into entry `id` and refits its plane.
     fn merge(&mut self, id: u64, o: &Observation) {
         let max_vertices = self.cfg.max_vertices;
+        self.unfile(id);
         let e = self.entries.get_mut(&id).expect("matched entries exist");
         if let Some(view) = o.shape_in(&e.frame) {
             // What two frames saw is confirmed and stays. What one frame saw stays until a
@@ -518,12 +587,14 @@ impl PolygonMap {
             e.shape = shown(e.seen.as_ref(), e.latest.as_ref(), max_vertices).unwrap_or(e.shape.clone());
         }
         refit(e, &o.moments, 1);
+        self.file(id);
     }
 
     /// Entry `other` merged into `id` (one observation bridged them), then dropped.
     fn absorb(&mut self, id: u64, other: u64) {
-        let Some(o) = self.entries.remove(&other) else { return };
+        let Some(o) = self.remove(other) else { return };
         let max_vertices = self.cfg.max_vertices;
+        self.unfile(id);
         let e = self.entries.get_mut(&id).expect("matched entries exist");
         let boundary = o.frame.lift_ring(o.shape.exterior(), &o.plane);
         let holes: Vec<_> = o.shape.interiors().iter().map(|r| o.frame.lift_ring(r, &o.plane)).collect();
@@ -532,33 +603,42 @@ impl PolygonMap {
         e.confirmed = union_into(e.confirmed.take(), theirs, max_vertices);
         e.shape = shown(e.seen.as_ref(), e.latest.as_ref(), max_vertices).unwrap_or(e.shape.clone());
         refit(e, &o.moments, o.observations);
+        self.file(id);
+    }
+
+    /// Entry `id` out of the map, its index and its labels.
+    fn remove(&mut self, id: u64) -> Option<Entry> {
+        self.unfile(id);
+        self.label_table.remove(id);
+        self.entries.remove(&id)
+    }
+
+    /// Entry `id` into the spatial index and the label table, as it is now.
+    fn file(&mut self, id: u64) {
+        let e = &self.entries[&id];
+        self.index.insert(indexed(id, &e.aabb));
+        self.label_table.set(id, e.facts);
+    }
+
+    /// Entry `id` out of the spatial index before it changes (its box with it).
+    fn unfile(&mut self, id: u64) {
+        if let Some(e) = self.entries.get(&id) {
+            self.index.remove(&indexed(id, &e.aabb));
+        }
     }
 
     /// Labels every entry; returns the ids whose label or step changed.
     fn relabel(&mut self) -> Vec<u64> {
-        let facts: Vec<labels::Facts> = self
-            .entries
-            .values()
-            .map(|e| labels::Facts {
-                tilt_deg: e.plane.normal.z.abs().clamp(0.0, 1.0).acos().to_degrees(),
-                height: e.centroid[2],
-                z_range: [e.aabb[0][2], e.aabb[1][2]],
-                depth: e.depth,
-                xy: [e.centroid[0], e.centroid[1]],
-            })
-            .collect();
-        let (out, stair) = labels::label(&facts, self.cfg.horizontal_max_tilt_deg, self.cfg.vertical_min_tilt_deg);
+        let (changed, stair) = self.label_table.relabel();
         self.stair = stair;
-        let mut changed = Vec::new();
-        for ((&id, e), (label, step)) in self.entries.iter_mut().zip(out) {
-            if e.label != label || e.step != step {
-                e.label = label;
-                e.step = step;
-                e.published = None;
-                changed.push(id);
-            }
-        }
         changed
+            .into_iter()
+            .map(|(id, (label, step))| {
+                let e = self.entries.get_mut(&id).expect("the label table holds the entries");
+                (e.label, e.step, e.published) = (label, step, None);
+                id
+            })
+            .collect()
     }
 
     /// One map polygon as planners see it (built on first request after a change).
@@ -773,6 +853,13 @@ fn refresh(e: &mut Entry) {
     e.centroid = e.frame.lift(c, &e.plane);
     e.aabb = aabb(&e.frame.lift_ring(e.shape.exterior(), &e.plane));
     e.depth = e.shape.minimum_rotated_rect().map_or(0.0, |r| min_side(&r));
+    e.facts = labels::Facts {
+        tilt_deg: e.plane.normal.z.abs().clamp(0.0, 1.0).acos().to_degrees(),
+        height: e.centroid[2],
+        z_range: [e.aabb[0][2], e.aabb[1][2]],
+        depth: e.depth,
+        xy: [e.centroid[0], e.centroid[1]],
+    };
     e.samples.clear();
     if let Some(r) = geo::BoundingRect::bounding_rect(&e.shape) {
         // A grid of about CLEAR_SAMPLES points over the shape, never finer than 1 cm nor
@@ -893,8 +980,43 @@ fn aabb(points: &[[f64; 3]]) -> [[f64; 3]; 2] {
     b
 }
 
-fn aabb_overlap(a: &[[f64; 3]; 2], b: &[[f64; 3]; 2], margin: f64) -> bool {
-    (0..3).all(|k| a[0][k] <= b[1][k] + margin && b[0][k] <= a[1][k] + margin)
+/// An entry in the spatial index: its world box and id.
+type Indexed = GeomWithData<Rectangle<[f64; 3]>, u64>;
+
+fn indexed(id: u64, aabb: &[[f64; 3]; 2]) -> Indexed {
+    GeomWithData::new(Rectangle::from_corners(aabb[0], aabb[1]), id)
+}
+
+/// The world box around everything a frame's depth image can judge: the pyramid of its
+/// image out to the farthest depth at which a map polygon's sample can still count for or
+/// against it. Support needs the sample within `clear_tolerance_m + 1 %` of the measured
+/// depth; seen-through needs it beyond the measurement; something standing on it needs
+/// the measured point under `OCCLUDER_M` over its plane, which along a ray at least
+/// `MIN_VIEW_COS` off the plane is at most `OCCLUDER_M / MIN_VIEW_COS` nearer.
+struct ViewBox(AABB<[f64; 3]>);
+
+impl ViewBox {
+    /// None when the image holds no valid depth (nothing can be judged).
+    fn new(
+        t_world_camera: &Isometry3<f64>,
+        depth_m: &Grid<f32>,
+        intr: &Intrinsics,
+        cfg: &MapConfig,
+    ) -> Option<ViewBox> {
+        let farthest = depth_m.data.iter().copied().filter(|z| z.is_finite()).fold(0.0f32, f32::max) as f64;
+        if farthest <= 0.0 {
+            return None;
+        }
+        let reach = ((farthest + cfg.clear_tolerance_m) / 0.99).max(farthest + OCCLUDER_M / MIN_VIEW_COS);
+        let (w, h) = (depth_m.width as f64, depth_m.height as f64);
+        // Pixel centres round to pixels from -0.5 to w - 0.5: the image's outer corners.
+        let corners = [(-0.5, -0.5), (w - 0.5, -0.5), (w - 0.5, h - 0.5), (-0.5, h - 0.5)];
+        let far = corners.iter().map(|&(u, v)| t_world_camera * Point3::from(intr.ray(u, v) * reach));
+        let apex = t_world_camera * Point3::origin();
+        let points: Vec<[f64; 3]> = far.chain([apex]).map(|p| [p.x, p.y, p.z]).collect();
+        let b = aabb(&points);
+        Some(ViewBox(AABB::from_corners(b[0], b[1])))
+    }
 }
 
 fn min_side(r: &Shape<f64>) -> f64 {
@@ -904,4 +1026,30 @@ fn min_side(r: &Shape<f64>) -> f64 {
     }
     let d = |a: Coord<f64>, b: Coord<f64>| (a.x - b.x).hypot(a.y - b.y);
     d(c[0], c[1]).min(d(c[1], c[2]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rstar::Envelope;
+
+    /// Every point a depth image can judge lies in its view box: the image's outermost
+    /// pixels, from the nearest depth to the farthest reach of a judgement.
+    #[test]
+    fn the_view_box_holds_every_point_the_depth_image_can_judge() {
+        let intr = Intrinsics::L515_320X240;
+        let cfg = MapConfig::default();
+        let pose = crate::synth::path::camera_pose(Point3::new(-2.0, 1.0, 1.5), 0.3, 40f64.to_radians(), 0.0);
+        let mut depth = Grid { width: 320, height: 240, data: vec![0.0f32; 320 * 240] };
+        assert!(ViewBox::new(&pose, &depth, &intr, &cfg).is_none(), "no depth, nothing to judge");
+        depth.data[1000] = 3.0;
+        let view = ViewBox::new(&pose, &depth, &intr, &cfg).expect("one valid pixel");
+        let reach = 3.0 + OCCLUDER_M / MIN_VIEW_COS;
+        for (u, v) in [(-0.5, -0.5), (319.49, -0.5), (319.49, 239.49), (-0.5, 239.49), (160.0, 120.0)] {
+            for z in [0.1, 1.0, 3.0, reach - 1e-9] {
+                let p = pose * Point3::from(intr.ray(u, v) * z);
+                assert!(view.0.contains_point(&[p.x, p.y, p.z]), "pixel ({u}, {v}) at {z} m");
+            }
+        }
+    }
 }
