@@ -570,3 +570,55 @@ fn bench_runs_the_cpu_stages_on_the_threads_it_is_given() {
         assert!(v["stages_ms"]["total"]["median"].as_f64().unwrap() > 0.0);
     }
 }
+
+#[test]
+fn pieces_of_one_plane_cut_apart_by_dropouts_are_joined_into_one_region_and_nothing_else_is() {
+    use polymap::extract::segment::Segmentation;
+    use polymap::grid::label_components;
+    // A 160 x 12 strip of a tread seen from 1.2 m (the nearest tread, cut by the image's
+    // bottom edge), columns 70..76 spoiled by dropouts (no depth in 71..75). `right` makes
+    // the right piece another plane.
+    let i = intr(160, 12);
+    let tread = Vector3::new(0.0, -0.8, -0.6).normalize();
+    let run = |right: Option<(Vector3<f64>, f64)>| {
+        let left = plane_depth(&i, tread, 1.2);
+        let other = right.map(|(n, d)| plane_depth(&i, n, d));
+        let w = 160;
+        let mut depth = left.clone();
+        for (k, z) in depth.data.iter_mut().enumerate() {
+            if k % w >= 73
+                && let Some(o) = &other
+            {
+                *z = o.data[k];
+            }
+            if (71..75).contains(&(k % w)) {
+                *z = 0.0;
+            }
+        }
+        let boundary =
+            Grid { width: w, height: 12, data: (0..w * 12).map(|k| u8::from((70..76).contains(&(k % w)))).collect() };
+        let mut seg = Segmentation::components(&boundary, 30);
+        assert_eq!(seg.pixels.len(), 2);
+        let batch = seg.points(&[0, 1], &depth, &i);
+        let mut fits = ransac::fit_planes(&batch, 64, 0.01);
+        assert!(fits.iter().all(|f| f.is_some_and(|f| f.inlier_ratio() > 0.95)), "each piece is a plane");
+        let joins = seg.join_coplanar(&mut fits, &depth, &i, 0.03, 0.01, 0.9);
+        (joins, seg, fits)
+    };
+    let (joins, seg, fits) = run(None);
+    assert_eq!(joins, 1);
+    assert!(seg.pixels[1].is_empty() && fits[1].is_none(), "the right piece went into the left");
+    assert!(fits[0].unwrap().normal.dot(&tread).abs() > 0.9999, "the joined plane is the tread's");
+    // The dropouts between are bridged: one connected region, the gap included.
+    let inside: Vec<bool> = seg.labels.data.iter().map(|&l| l == 1).collect();
+    assert_eq!(label_components(&inside, 160, 12).1, 1, "one connected region");
+    assert_eq!(seg.pixels[0].len(), 160 * 12, "both pieces and the bridged gap");
+    // A parallel plane 3 cm further (no depth step at this range, but not the same plane).
+    let (joins, seg, _) = run(Some((tread, 1.23)));
+    assert_eq!(joins, 0);
+    assert!(!seg.pixels[1].is_empty());
+    // A plane 10 degrees off, meeting the tread at the gap.
+    let tilted = nalgebra::UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 10f64.to_radians()) * tread;
+    let (joins, _, _) = run(Some((tilted, 1.2)));
+    assert_eq!(joins, 0);
+}

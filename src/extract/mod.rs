@@ -319,6 +319,7 @@ pub fn segment_and_fit(
         }
     }
     times.ransac += lap();
+    seg.join_coplanar(&mut fits, depth, intr, cfg.depth_edge_ratio as f32, dist, min_ratio);
     let accepted: Vec<bool> = fits.iter().map(|f| f.is_some_and(|f| f.inlier_ratio() >= min_ratio)).collect();
     seg.grow(&fits, &accepted, depth, intr, dist, cfg.region_grow_px);
     let regions = contours::trace(&seg, cfg.simplify_tolerance_px);

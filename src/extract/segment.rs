@@ -244,6 +244,13 @@ impl Segmentation {
     /// The creases between regions; `ratio` is the depth step, relative to the depth, that
     /// parts two neighbouring pixels (as the boundary map's, per pixel of distance).
     pub fn creases(&self, depth: &Grid<f32>, ratio: f32) -> Creases {
+        Creases { steps: self.steps_between(depth, ratio, MAX_CREASE_GAP_PX) }
+    }
+
+    /// For each pair of regions (labels a < b, sorted), how many times a row or a column
+    /// steps from one to the other across at most `max_gap` unlabelled pixels with no depth
+    /// step (`ratio` per pixel of distance) between the two pixels.
+    fn steps_between(&self, depth: &Grid<f32>, ratio: f32, max_gap: usize) -> Vec<((u32, u32), u32)> {
         let (w, h) = (self.labels.width, self.labels.height);
         let (l, z) = (&self.labels.data, &depth.data);
         let mut steps = Vec::new();
@@ -255,9 +262,9 @@ impl Segmentation {
             }
         };
         // The nearest labelled pixel before j, `stride` apart (1: along the row, w: up the
-        // column), at most MAX_CREASE_GAP_PX + 1 steps back and `room` steps at most.
+        // column), at most max_gap + 1 steps back and `room` steps at most.
         let nearest = |j: usize, stride: usize, room: usize| {
-            (1..=room.min(MAX_CREASE_GAP_PX + 1)).map(|k| (j - k * stride, k)).find(|&(i, _)| l[i] != 0)
+            (1..=room.min(max_gap + 1)).map(|k| (j - k * stride, k)).find(|&(i, _)| l[i] != 0)
         };
         for v in 0..h {
             for u in 0..w {
@@ -282,9 +289,118 @@ impl Segmentation {
                 _ => counted.push((pair, 1)),
             }
         }
-        Creases { steps: counted }
+        counted
+    }
+
+    /// Joins regions of one plane that something cut apart: a row of sensor dropouts
+    /// across a thin strip (a tread cut by the image's bottom edge leaves a strip a few
+    /// pixels tall, and every dropout's spoiled square of normals cuts it through), into
+    /// pieces each too small to keep. Two regions join when they touch across at most
+    /// `JOIN_GAP_PX` with no depth step, their planes are within `JOIN_ANGLE_COS`, and
+    /// their union is still one plane: refitted, at least `min_ratio` of its points
+    /// within `dist`. The region joined into keeps the lower index; the other is left
+    /// empty, its fit None. Returns how many joins were made.
+    #[allow(clippy::too_many_arguments)]
+    pub fn join_coplanar(
+        &mut self,
+        fits: &mut [Option<PlaneFit>],
+        depth: &Grid<f32>,
+        intr: &Intrinsics,
+        ratio: f32,
+        dist: f32,
+        min_ratio: f64,
+    ) -> usize {
+        let rays = Rays::new(depth, intr);
+        let mut joins = 0;
+        let mut joined_into = vec![false; self.pixels.len()];
+        for ((a, b), n) in self.steps_between(depth, ratio, JOIN_GAP_PX) {
+            let (a, b) = (a as usize - 1, b as usize - 1);
+            // Pairs are in label order and a region joined away is empty: skip those.
+            let (Some(fa), Some(fb)) = (fits[a], fits[b]) else { continue };
+            if n < MIN_CREASE_STEPS
+                || self.pixels[a].is_empty()
+                || self.pixels[b].is_empty()
+                || fa.normal.dot(&fb.normal) < JOIN_ANGLE_COS
+            {
+                continue;
+            }
+            let pts: Vec<[f32; 3]> =
+                self.pixels[a].iter().chain(&self.pixels[b]).filter_map(|&i| rays.point(i as usize, depth)).collect();
+            let start = if fa.points >= fb.points { fa } else { fb };
+            let Some(joined) = refit(&pts, start.normal_f32(), start.offset as f32, dist) else { continue };
+            if joined.inlier_ratio() < min_ratio {
+                continue;
+            }
+            let moved = std::mem::take(&mut self.pixels[b]);
+            for &i in &moved {
+                self.labels.data[i as usize] = a as u32 + 1;
+            }
+            self.pixels[a].extend(moved);
+            self.pixels[a].sort_unstable();
+            (fits[a], fits[b]) = (Some(joined), None);
+            joined_into[a] = true;
+            joins += 1;
+        }
+        if joins > 0 {
+            self.bridge(&joined_into, fits, depth, &rays, dist);
+        }
+        joins
+    }
+
+    /// Fills the gaps (at most `JOIN_GAP_PX`, along rows and columns) between two pixels
+    /// of one region marked in `regions`, where every pixel of the gap is a dropout or lies
+    /// on the region's plane: the pieces a join united become one connected region (an
+    /// outline is traced around one connected region).
+    fn bridge(&mut self, regions: &[bool], fits: &[Option<PlaneFit>], depth: &Grid<f32>, rays: &Rays, dist: f32) {
+        let (w, h) = (self.labels.width, self.labels.height);
+        let mut fills: Vec<(u32, u32)> = Vec::new();
+        for (stride, lines, len) in [(1, h, w), (w, w, h)] {
+            let line_start = |k: usize| if stride == 1 { k * w } else { k };
+            let step = if stride == 1 { 1 } else { w };
+            for k in 0..lines {
+                let at = |t: usize| line_start(k) + t * step;
+                let mut last: Option<(usize, u32)> = None;
+                for t in 0..len {
+                    let l = self.labels.data[at(t)];
+                    if l == 0 {
+                        continue;
+                    }
+                    if let Some((t0, l0)) = last
+                        && l0 == l
+                        && t - t0 > 1
+                        && t - t0 <= JOIN_GAP_PX + 1
+                        && regions[l as usize - 1]
+                        && let Some(fit) = &fits[l as usize - 1]
+                    {
+                        let gap = (t0 + 1..t).map(at);
+                        let on_plane = |i: usize| rays.point(i, depth).is_none_or(|p| fit.distance(&p) < dist as f64);
+                        if gap.clone().all(on_plane) {
+                            fills.extend(gap.map(|i| (i as u32, l)));
+                        }
+                    }
+                    last = Some((t, l));
+                }
+            }
+        }
+        for (i, l) in fills {
+            if self.labels.data[i as usize] == 0 {
+                self.labels.data[i as usize] = l;
+                self.pixels[l as usize - 1].push(i);
+            }
+        }
+        for (r, p) in self.pixels.iter_mut().enumerate() {
+            if regions[r] {
+                p.sort_unstable();
+            }
+        }
     }
 }
+
+/// Regions of one plane cut apart by at most this many pixels are joined (a dropout's
+/// spoiled square of normals, sealed: about the normal kernel and the seal).
+const JOIN_GAP_PX: usize = 8;
+/// Planes of regions that may join are within this (cos of 3 deg).
+const JOIN_ANGLE_COS: f64 = 0.9986;
 
 /// How far around a region, per wave of growth, its plane competes for pixels: far
 /// enough to cover the edge band between two regions even where neither can grow
