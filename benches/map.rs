@@ -38,6 +38,7 @@ fn seen(i: usize, t_camera_world: &Isometry3<f64>) -> Polygon {
         pixel_count: 2000,
         inlier_ratio: 1.0,
         rms: 0.002,
+        uncertainty: Default::default(),
     };
     world.transformed(t_camera_world)
 }

@@ -38,6 +38,7 @@ fn seen(xy: &[[f64; 2]], z: f64, pose: &Isometry3<f64>) -> Polygon {
         pixel_count: 1000,
         inlier_ratio: 1.0,
         rms: 0.001,
+        uncertainty: Default::default(),
     };
     world.transformed(&pose.inverse())
 }
@@ -236,6 +237,7 @@ fn outlines_are_pulled_in_by_what_their_vertices_lie_on_and_not_at_all_along_a_c
         pixel_count: 1000,
         inlier_ratio: 1.0,
         rms: 0.001,
+        uncertainty: Default::default(),
     }
     .transformed(&pose.inverse());
     let back_edge_kept = |back: VertexKind| {
@@ -367,6 +369,7 @@ fn labels_name_a_staircase() {
         pixel_count: 500,
         inlier_ratio: 1.0,
         rms: 0.001,
+        uncertainty: Default::default(),
     };
     polys.push(riser.transformed(&pose.inverse()));
     map.update(&polys, &pose, &intr, None);

@@ -12,6 +12,7 @@ pub mod gpu;
 pub mod polygon;
 pub mod segment;
 pub mod trim;
+pub mod uncertainty;
 
 use std::time::Instant;
 

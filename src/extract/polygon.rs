@@ -9,6 +9,7 @@ use super::contours::Region;
 use super::cpu::ransac::PlaneFit;
 use super::segment::Segmentation;
 use super::trim;
+use super::uncertainty::{PlaneUncertainty, plane_uncertainty};
 use crate::config::PipelineConfig;
 use crate::grid::Grid;
 use crate::ring::ring_area;
@@ -48,6 +49,8 @@ pub struct Polygon {
     pub inlier_ratio: f64,
     /// RMS point-to-plane distance of the inliers, m.
     pub rms: f64,
+    /// How well its plane is known (extract::uncertainty).
+    pub uncertainty: PlaneUncertainty,
 }
 
 impl Polygon {
@@ -65,6 +68,9 @@ impl Polygon {
             offset: -n.dot(&on_plane.coords),
             boundary: self.boundary.iter().map(p).collect(),
             holes: self.holes.iter().map(|h| h.iter().map(p).collect()).collect(),
+            uncertainty: self
+                .uncertainty
+                .moved(|v| (t.rotation * Vector3::from(v)).into(), |v| (t * Point3::from(v)).coords.into()),
             ..self.clone()
         }
     }
@@ -105,8 +111,9 @@ pub fn build_polygons(
 ) -> Vec<Polygon> {
     let mut out = Vec::new();
     let mut points = Vec::new();
-    // Each polygon's region label.
+    // Each polygon's region label and plane fit.
     let mut labels = Vec::new();
+    let mut plane_fits = Vec::new();
     for (region, fit) in regions.iter().zip(fits) {
         let Some(fit) = fit else {
             tracing::debug!("region {} ({} px): no plane fit", region.label, region.pixels);
@@ -154,8 +161,11 @@ pub fn build_polygons(
             pixel_count: region.pixels,
             inlier_ratio: fit.inlier_ratio(),
             rms: fit.rms,
+            // Known once the polygon is kept (below): most regions are not.
+            uncertainty: PlaneUncertainty::default(),
         });
         points.push(seg.points(&[region.label as usize - 1], depth, intr).points);
+        plane_fits.push(*fit);
         labels.push(region.label);
     }
     let creases = seg.creases(depth, cfg.depth_edge_ratio as f32);
@@ -170,6 +180,19 @@ pub fn build_polygons(
             .filter(|(h, _)| ring_area(h, &n) >= cfg.min_polygon_area_m2)
             .unzip();
         p.area = ring_area(&p.boundary, &n) - p.holes.iter().map(|h| ring_area(h, &n)).sum::<f64>();
+    }
+    // A plane too poorly spread to fix (its inliers on a line) is no surface.
+    for ((p, fit), pts) in out.iter_mut().zip(&plane_fits).zip(&points) {
+        if p.area < cfg.min_polygon_area_m2 {
+            continue;
+        }
+        match plane_uncertainty(pts, fit, cfg.ransac_inlier_distance_m) {
+            Some(u) => p.uncertainty = u,
+            None => {
+                tracing::debug!("polygon of {} px: its inliers do not fix a plane", p.pixel_count);
+                p.area = 0.0;
+            }
+        }
     }
     // Ids in the order kept; cuts name their neighbour by its new id.
     let mut next = 0;

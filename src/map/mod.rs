@@ -699,6 +699,7 @@ impl PolygonMap {
                 pixel_count: 0,
                 inlier_ratio: 1.0,
                 rms: 0.0,
+                uncertainty: Default::default(),
             };
             if let Some(why) = polygon_problem(&as_frame_polygon) {
                 return Err(format!("polygon {}: {why}", p.id));

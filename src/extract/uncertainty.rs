@@ -1,0 +1,133 @@
+//! How well a fitted plane is known, from its inliers and the sensor's noise.
+//!
+//! The plane is fitted by least squares (PCA) to its inliers. Linearised at their centroid,
+//! a small error of the fit tilts the normal by (a1, a2) rad towards two in-plane axes and
+//! shifts the plane by `shift` m along the normal there; each inlier's residual moves by
+//! `a1 (p - c).e1 + a2 (p - c).e2 - shift`. A depth pixel is noisy along its ray; the part
+//! of that noise across the plane is what moves the fit. Its standard deviation follows
+//! the L515's shape (as `synth::noise` models it): proportional to 0.5 + 0.5 r / 1 m along
+//! the ray at range r, grown by 1 / sqrt(cos) at incidence cos, times cos across the
+//! plane. The scale of that shape is the fit's own: the residuals' weighted RMS, so no
+//! sensor constant is needed and a noisier sensor reports a larger covariance. The
+//! covariance of (a1, a2, shift) for the unweighted fit is then the sandwich
+//! H^-1 (sum s_i^2 a_i a_i^T) H^-1 with H = sum a_i a_i^T.
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use serde::{Deserialize, Serialize};
+
+use super::cpu::ransac::PlaneFit;
+
+/// The covariance of a fitted plane: its normal tilts by (a1, a2) rad towards `axes[0]`
+/// and `axes[1]`, and it shifts by `shift` m along the normal at `centre`; `cov` is the
+/// covariance of (a1, a2, shift). All in the polygon's frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PlaneUncertainty {
+    pub centre: [f64; 3],
+    pub axes: [[f64; 3]; 2],
+    pub cov: [[f64; 3]; 3],
+}
+
+impl PlaneUncertainty {
+    /// Standard deviation of the normal's direction along its worst axis, rad.
+    pub fn tilt_sigma_rad(&self) -> f64 {
+        let [[a, b, _], [_, d, _], _] = self.cov;
+        // Largest eigenvalue of the 2 x 2 tilt block.
+        let (m, r) = ((a + d) / 2.0, (((a - d) / 2.0).powi(2) + b * b).sqrt());
+        (m + r).max(0.0).sqrt()
+    }
+
+    /// Standard deviation of the plane's position along its normal at `centre`, m.
+    pub fn offset_sigma_m(&self) -> f64 {
+        self.cov[2][2].max(0.0).sqrt()
+    }
+
+    /// (a1, a2, shift) of another plane (unit normal n, offset d) against this one's:
+    /// what `cov` is the covariance of.
+    pub fn error_of(&self, normal: &Vector3<f64>, offset: f64) -> Vector3<f64> {
+        let c = Vector3::from(self.centre);
+        Vector3::new(
+            normal.dot(&Vector3::from(self.axes[0])),
+            normal.dot(&Vector3::from(self.axes[1])),
+            -(normal.dot(&c) + offset),
+        )
+    }
+
+    /// The same uncertainty seen in another frame (`rotate` then `translate`).
+    pub fn moved(&self, rotate: impl Fn([f64; 3]) -> [f64; 3], translate: impl Fn([f64; 3]) -> [f64; 3]) -> Self {
+        PlaneUncertainty { centre: translate(self.centre), axes: self.axes.map(rotate), cov: self.cov }
+    }
+}
+
+/// The variance of the across-plane noise of a point at `p` (camera frame) on a plane of
+/// unit normal `n`, up to the sensor's scale (see the module's doc): (0.5 + 0.5 r)^2 cos.
+fn relative_variance(p: &Vector3<f64>, n: &Vector3<f64>) -> f64 {
+    let r = p.norm();
+    let cos = (n.dot(p) / r).abs().max(0.05);
+    (0.5 + 0.5 * r).powi(2) * cos
+}
+
+/// The uncertainty of `fit` from the points within `dist` of its plane; None with too few
+/// of them to fix a plane (fewer than 4, or all on a line).
+pub fn plane_uncertainty(points: &[[f32; 3]], fit: &PlaneFit, dist: f64) -> Option<PlaneUncertainty> {
+    let n = fit.normal;
+    // Any in-plane axis, and the one across it.
+    let helper = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+    let e1 = n.cross(&helper).normalize();
+    let e2 = n.cross(&e1);
+    // A large region's sums are those of every k-th point times k, to well under a percent
+    // (its points lie on a regular pixel grid): the covariance costs the same for any size.
+    let stride = points.len().div_ceil(MAX_POINTS).max(1);
+    // One pass: a_i = (x, y, -1) with x, y the lever arms along e1, e2, taken from the
+    // plane's foot of the camera for now and moved to the inliers' centroid after; H and
+    // M from sums of x^2, xy, y^2, x, y, 1, plain and weighted by each point's g^2.
+    let foot = -n * fit.offset;
+    let (mut h, mut m) = ([0.0; 6], [0.0; 6]);
+    let (mut scale, mut count, mut sum) = (0.0, 0usize, Vector3::zeros());
+    for p in points.iter().step_by(stride) {
+        let p = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+        let r = n.dot(&p) + fit.offset;
+        if r.abs() >= dist {
+            continue;
+        }
+        let (x, y) = ((p - foot).dot(&e1), (p - foot).dot(&e2));
+        let g2 = relative_variance(&p, &n);
+        scale += r * r / g2;
+        count += 1;
+        sum += p;
+        let terms = [x * x, x * y, y * y, x, y, 1.0];
+        for k in 0..6 {
+            h[k] += terms[k];
+            m[k] += terms[k] * g2;
+        }
+    }
+    if count < 4 {
+        return None;
+    }
+    let c = sum / count as f64;
+    // Lever arms from the centroid: x' = x - cx, so sum x'^2 = sum x^2 - 2 cx sum x + cx^2 sum 1.
+    let (cx, cy) = ((c - foot).dot(&e1), (c - foot).dot(&e2));
+    let centred = |s: [f64; 6]| {
+        let (sx, sy, s1) = (s[3] - cx * s[5], s[4] - cy * s[5], s[5]);
+        let sxx = s[0] - 2.0 * cx * s[3] + cx * cx * s[5];
+        let sxy = s[1] - cx * s[4] - cy * s[3] + cx * cy * s[5];
+        let syy = s[2] - 2.0 * cy * s[4] + cy * cy * s[5];
+        Matrix3::new(sxx, sxy, -sx, sxy, syy, -sy, -sx, -sy, s1) * stride as f64
+    };
+    let (h, m) = (centred(h), centred(m));
+    // Three parameters fitted: the residuals' weighted variance has N - 3 degrees of freedom.
+    let scale = scale / (count - 3) as f64;
+    // Points on a line leave a tilt free: no covariance worth the name.
+    if !(SymmetricEigen::new(h).eigenvalues.min() > 1e-12 * h.trace()) {
+        return None;
+    }
+    let h_inv = h.try_inverse()?;
+    let cov = h_inv * m * h_inv * scale;
+    if !cov.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let row = |k: usize| [cov[(k, 0)], cov[(k, 1)], cov[(k, 2)]];
+    Some(PlaneUncertainty { centre: c.into(), axes: [e1.into(), e2.into()], cov: [row(0), row(1), row(2)] })
+}
+
+/// The most points the covariance sums run over (see `plane_uncertainty`).
+const MAX_POINTS: usize = 2048;
