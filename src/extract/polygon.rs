@@ -181,31 +181,40 @@ pub fn build_polygons(
             .unzip();
         p.area = ring_area(&p.boundary, &n) - p.holes.iter().map(|h| ring_area(h, &n)).sum::<f64>();
     }
-    // A plane too poorly spread to fix (its inliers on a line) is no surface.
-    for ((p, fit), pts) in out.iter_mut().zip(&plane_fits).zip(&points) {
-        if p.area < cfg.min_polygon_area_m2 {
-            continue;
-        }
-        match plane_uncertainty(pts, fit, cfg.ransac_inlier_distance_m) {
-            Some(u) => p.uncertainty = u,
-            None => {
-                tracing::debug!("polygon of {} px: its inliers do not fix a plane", p.pixel_count);
-                p.area = 0.0;
+    // Kept: big enough, and a plane its inliers fix (not all on a line).
+    let keep: Vec<bool> = out
+        .iter_mut()
+        .zip(&plane_fits)
+        .zip(&points)
+        .map(|((p, fit), pts)| {
+            if p.area < cfg.min_polygon_area_m2 {
+                return false;
             }
-        }
-    }
+            match plane_uncertainty(pts, fit, cfg.ransac_inlier_distance_m) {
+                Some(u) => {
+                    p.uncertainty = u;
+                    true
+                }
+                None => {
+                    tracing::debug!("polygon of {} px: its inliers do not fix a plane", p.pixel_count);
+                    false
+                }
+            }
+        })
+        .collect();
     // Ids in the order kept; cuts name their neighbour by its new id.
     let mut next = 0;
-    let new_id: Vec<Option<u32>> = out
+    let new_id: Vec<Option<u32>> = keep
         .iter()
-        .map(|p| {
-            (p.area >= cfg.min_polygon_area_m2).then(|| {
+        .map(|&k| {
+            k.then(|| {
                 next += 1;
                 next - 1
             })
         })
         .collect();
-    out.retain(|p| p.area >= cfg.min_polygon_area_m2);
+    let mut kept = keep.iter();
+    out.retain(|_| *kept.next().expect("one flag per polygon"));
     for (id, p) in out.iter_mut().enumerate() {
         p.id = id as u32;
         for kind in p.boundary_kinds.iter_mut().chain(p.hole_kinds.iter_mut().flatten()) {
@@ -220,10 +229,15 @@ pub fn build_polygons(
 /// Outline vertices within this many pixels of the image's edge are on its border.
 pub const BORDER_PX: i64 = 3;
 
+/// The image pixel an outline vertex (u, v) rounds to.
+fn pixel_of([u, v]: [f32; 2], w: i64, h: i64) -> (i64, i64) {
+    ((u.round() as i64).clamp(0, w - 1), (v.round() as i64).clamp(0, h - 1))
+}
+
 /// What a vertex of a region's pixel outline lies on, before any cut.
-fn kind_of_pixel([u, v]: [f32; 2], image: &Grid<f32>) -> VertexKind {
+fn kind_of_pixel(vertex: [f32; 2], image: &Grid<f32>) -> VertexKind {
     let (w, h) = (image.width as i64, image.height as i64);
-    let (pu, pv) = ((u.round() as i64).clamp(0, w - 1), (v.round() as i64).clamp(0, h - 1));
+    let (pu, pv) = pixel_of(vertex, w, h);
     if pu >= BORDER_PX && pv >= BORDER_PX && pu < w - BORDER_PX && pv < h - BORDER_PX {
         VertexKind::Inside
     } else {
@@ -252,11 +266,11 @@ fn drop_border_vertices_onto_plane(
     let (w, h) = (depth.width as i64, depth.height as i64);
     let n = boundary.len().max(1) as f64;
     let centre = boundary.iter().fold(Vector3::zeros(), |acc, v| acc + Vector3::from(*v)) / n;
-    for ((vertex, &[u, v]), kind) in boundary.iter_mut().zip(outline_px).zip(kinds) {
+    for ((vertex, &px), kind) in boundary.iter_mut().zip(outline_px).zip(kinds) {
         if *kind != VertexKind::ImageBorder {
             continue;
         }
-        let (pu, pv) = ((u.round() as i64).clamp(0, w - 1), (v.round() as i64).clamp(0, h - 1));
+        let (pu, pv) = pixel_of(px, w, h);
         // The region's pixel at the vertex (it lies half a pixel outside its pixels).
         let Some((x, y)) = (-1..=1)
             .flat_map(|dv| (-1..=1).map(move |du| (pu + du, pv + dv)))

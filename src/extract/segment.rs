@@ -354,11 +354,10 @@ impl Segmentation {
     fn bridge(&mut self, regions: &[bool], fits: &[Option<PlaneFit>], depth: &Grid<f32>, rays: &Rays, dist: f32) {
         let (w, h) = (self.labels.width, self.labels.height);
         let mut fills: Vec<(u32, u32)> = Vec::new();
-        for (stride, lines, len) in [(1, h, w), (w, w, h)] {
-            let line_start = |k: usize| if stride == 1 { k * w } else { k };
-            let step = if stride == 1 { 1 } else { w };
+        // Rows (pixels 1 apart, rows w apart), then columns (pixels w apart, columns 1 apart).
+        for (step, line_step, lines, len) in [(1, w, h, w), (w, 1, w, h)] {
             for k in 0..lines {
-                let at = |t: usize| line_start(k) + t * step;
+                let at = |t: usize| k * line_step + t * step;
                 let mut last: Option<(usize, u32)> = None;
                 for t in 0..len {
                     let l = self.labels.data[at(t)];

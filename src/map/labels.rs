@@ -207,16 +207,20 @@ impl Table {
         }
     }
 
-    /// Labels everything again: the polygons whose label or step changed, with their new
-    /// ones, and the stair.
-    pub fn relabel(&mut self) -> (Vec<(u64, Labelled)>, Option<Stair>) {
+    /// Polygon `id`'s label and step (a slope without step for one not in the table).
+    pub fn labelled(&self, id: u64) -> Labelled {
+        self.ids.binary_search(&id).map_or((Label::Slope, None), |k| self.labels[k])
+    }
+
+    /// Labels everything again: the polygons whose label or step changed, and the stair.
+    pub fn relabel(&mut self) -> (Vec<u64>, Option<Stair>) {
         let heights = self.heights.iter().map(|(h, _)| h.0);
         let (out, stair) = label(&self.facts, heights, self.horizontal_max_tilt_deg, self.vertical_min_tilt_deg);
         let mut changed = Vec::new();
         for ((id, old), new) in self.ids.iter().zip(&mut self.labels).zip(out) {
             if *old != new {
                 *old = new;
-                changed.push((*id, new));
+                changed.push(*id);
             }
         }
         (changed, stair)

@@ -124,15 +124,11 @@ struct Entry {
     observations: u32,
     /// Frames in a row that contradicted it.
     misses: u32,
-    label: Label,
-    step: Option<u32>,
     /// World axis-aligned box of the outline, for quick rejection.
     aabb: [[f64; 3]; 2],
     area: f64,
     centroid: [f64; 3],
-    /// Width of the smallest rectangle enclosing the shape, m (a tread's depth, for labels).
-    depth: f64,
-    /// What labelling needs of it.
+    /// What labelling needs of it (its label and step are in the map's label table).
     facts: labels::Facts,
     /// Points inside the shape that clearing checks against the depth image.
     samples: Vec<Coord<f64>>,
@@ -327,7 +323,7 @@ impl PolygonMap {
         let (mut weight, mut sum) = (0.0, 0.0);
         for o in obs.iter().filter(|o| o.horizontal) {
             for m in self.matches(o) {
-                if self.entries[&m.id].label.is_horizontal() {
+                if self.label_table.labelled(m.id).0.is_horizontal() {
                     weight += m.area;
                     sum += m.area * m.dz * self.entries[&m.id].frame.normal.z;
                 }
@@ -548,12 +544,9 @@ impl PolygonMap {
             plane: o.plane,
             observations: 1,
             misses: 0,
-            label: Label::Slope,
-            step: None,
             aabb: o.aabb,
             area: 0.0,
             centroid: [0.0; 3],
-            depth: 0.0,
             facts: labels::Facts::default(),
             samples: Vec::new(),
             published: None,
@@ -631,14 +624,10 @@ impl PolygonMap {
     fn relabel(&mut self) -> Vec<u64> {
         let (changed, stair) = self.label_table.relabel();
         self.stair = stair;
+        for id in &changed {
+            self.entries.get_mut(id).expect("the label table holds the entries").published = None;
+        }
         changed
-            .into_iter()
-            .map(|(id, (label, step))| {
-                let e = self.entries.get_mut(&id).expect("the label table holds the entries");
-                (e.label, e.step, e.published) = (label, step, None);
-                id
-            })
-            .collect()
     }
 
     /// One map polygon as planners see it (built on first request after a change).
@@ -646,7 +635,7 @@ impl PolygonMap {
         let margin = self.cfg.foot_margin_m;
         let e = self.entries.get_mut(&id)?;
         if e.published.is_none() {
-            e.published = Some(publish(id, e, margin));
+            e.published = Some(publish(id, e, self.label_table.labelled(id), margin));
         }
         e.published.clone()
     }
@@ -853,12 +842,12 @@ fn refresh(e: &mut Entry) {
     let c = e.shape.centroid().map_or(Coord { x: 0.0, y: 0.0 }, |p| p.0);
     e.centroid = e.frame.lift(c, &e.plane);
     e.aabb = aabb(&e.frame.lift_ring(e.shape.exterior(), &e.plane));
-    e.depth = e.shape.minimum_rotated_rect().map_or(0.0, |r| min_side(&r));
     e.facts = labels::Facts {
         tilt_deg: e.plane.normal.z.abs().clamp(0.0, 1.0).acos().to_degrees(),
         height: e.centroid[2],
         z_range: [e.aabb[0][2], e.aabb[1][2]],
-        depth: e.depth,
+        // The width of the smallest rectangle enclosing the shape: a tread's depth.
+        depth: e.shape.minimum_rotated_rect().map_or(0.0, |r| min_side(&r)),
         xy: [e.centroid[0], e.centroid[1]],
     };
     e.samples.clear();
@@ -940,7 +929,7 @@ fn stands_on(e: &Entry, t_world_camera: &Isometry3<f64>, measured: &Point3<f64>)
 }
 
 /// The planner's view of an entry.
-fn publish(id: u64, e: &Entry, foot_margin: f64) -> MapPolygon {
+fn publish(id: u64, e: &Entry, (label, step): labels::Labelled, foot_margin: f64) -> MapPolygon {
     let lift_ring = |r: &geo::LineString<f64>| e.frame.lift_ring(r, &e.plane);
     let inset_shapes = geometry::inset(&e.shape, foot_margin);
     let convex_pieces = inset_shapes
@@ -955,7 +944,7 @@ fn publish(id: u64, e: &Entry, foot_margin: f64) -> MapPolygon {
     let n = e.plane.normal;
     MapPolygon {
         id,
-        label: e.label,
+        label,
         normal: [n.x, n.y, n.z],
         offset: e.plane.offset,
         // The shape lies on the frame's plane; tilting onto the fitted plane stretches it.
@@ -966,7 +955,7 @@ fn publish(id: u64, e: &Entry, foot_margin: f64) -> MapPolygon {
         convex_pieces,
         insets: inset_shapes.iter().map(region).collect(),
         observations: e.observations,
-        step: e.step,
+        step,
     }
 }
 
