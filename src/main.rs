@@ -93,6 +93,13 @@ enum Command {
         /// Score this map (from `polymap replay --out`) against the truth instead of single frames
         #[arg(long)]
         map: Option<PathBuf>,
+        /// Score each frame's polygons against per-pixel plane truth (labels.png, planes.txt:
+        /// ../shared/real/abw) with Hoover et al.'s metric; SEQ may be a folder of such sequences
+        #[arg(long, conflicts_with = "map")]
+        segmentation: bool,
+        /// With --segmentation: the overlap a correct detection needs, of both (Hoover's T)
+        #[arg(long, default_value_t = 0.8)]
+        tolerance: f64,
     },
     /// Time extraction per stage over many frames (looping the sequence): median, p99, fps
     Bench {
@@ -265,13 +272,20 @@ fn run(cli: Cli) -> Result<()> {
                 None => println!("{json}"),
             }
         }
-        Command::Eval { seq, config, json, backend, debug, map: Some(map) } => {
+        Command::Eval { seq, config, json, backend, debug, segmentation: true, tolerance, .. } => {
+            if !(tolerance > 0.5 && tolerance <= 1.0) {
+                bail!("--tolerance {tolerance}: Hoover's tolerance lies in (0.5, 1]");
+            }
+            let config = load_config(config, backend)?;
+            evaluate_segmentation(&seq, &config, tolerance, json, debug.as_deref())?;
+        }
+        Command::Eval { seq, config, json, backend, debug, map: Some(map), .. } => {
             if config.is_some() || backend.is_some() {
                 bail!("--map scores a finished map: --config and --backend do not apply");
             }
             evaluate_map(&Sequence::open(&seq)?, &map, json, debug.as_deref())?;
         }
-        Command::Eval { seq, config, json, backend, debug, map: None } => {
+        Command::Eval { seq, config, json, backend, debug, map: None, .. } => {
             let config = load_config(config, backend)?;
             evaluate(&Sequence::open(&seq)?, &config, json, debug.as_deref())?;
         }
@@ -477,6 +491,106 @@ fn evaluate(s: &Sequence, config: &Config, json: bool, debug: Option<&Path>) -> 
         m.step_error_mean_mm,
         m.step_error_std_mm,
         m.step_pairs
+    );
+    Ok(())
+}
+
+/// `polymap eval SEQ --segmentation`: every frame's polygons against per-pixel plane truth,
+/// scored with Hoover et al.'s metric; SEQ is one such sequence or a folder of them.
+fn evaluate_segmentation(dir: &Path, config: &Config, tolerance: f64, json: bool, debug: Option<&Path>) -> Result<()> {
+    use eval::segmentation::{FaceTruth, hoover, polygon_normals, polygon_regions};
+    let dirs = if dir.join("camera.toml").exists() {
+        vec![dir.to_path_buf()]
+    } else {
+        let mut dirs: Vec<PathBuf> = std::fs::read_dir(dir)
+            .with_context(|| format!("reading {}", dir.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.join("labels.png").exists())
+            .collect();
+        // Natural order, so abw.test.10 comes after abw.test.9.
+        dirs.sort_by_key(|p| {
+            let name = p.file_name().unwrap_or_default().to_string_lossy().to_string();
+            let digits = name.len() - name.trim_end_matches(|c: char| c.is_ascii_digit()).len();
+            (name[..name.len() - digits].to_string(), name[name.len() - digits..].parse::<u64>().unwrap_or(0))
+        });
+        dirs
+    };
+    if dirs.is_empty() {
+        bail!("{}: no sequence with labels.png and planes.txt in it", dir.display());
+    }
+    let mut extractor = extract::Extractor::new(&config.pipeline)?;
+    let mut rows = Vec::new();
+    for d in &dirs {
+        let s = Sequence::open(d)?;
+        let truth = FaceTruth::open(d)?;
+        if (truth.width, truth.height) != (s.intrinsics.width as usize, s.intrinsics.height as usize) {
+            bail!(
+                "{}: labels.png is {}x{}, the camera {}x{}",
+                d.display(),
+                truth.width,
+                truth.height,
+                s.intrinsics.width,
+                s.intrinsics.height
+            );
+        }
+        for k in 0..s.len() {
+            let depth = s.depth(k)?;
+            let (result, _, _) = extractor.extract(&depth, &s.intrinsics)?;
+            let regions = polygon_regions(&result.polygons, &depth, &s.intrinsics);
+            let score = hoover(&truth, &regions, &polygon_normals(&result.polygons), tolerance);
+            let name = if s.len() == 1 { d.display().to_string() } else { format!("{} frame {k}", d.display()) };
+            if let Some(out) = debug {
+                std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+                let path = out.join(format!("{}_{k:06}.png", d.file_name().unwrap_or_default().to_string_lossy()));
+                eval::segmentation::picture(&truth, &regions, &score)
+                    .save(&path)
+                    .with_context(|| format!("writing {}", path.display()))?;
+            }
+            rows.push((name, score));
+        }
+    }
+    let scores: Vec<_> = rows.iter().map(|(_, s)| s.clone()).collect();
+    let summary = eval::segmentation::summarise(&scores, tolerance);
+    if json {
+        let images: Vec<_> = rows.iter().map(|(name, s)| serde_json::json!({ "image": name, "score": s })).collect();
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "images": images, "summary": summary }))?);
+        return Ok(());
+    }
+    println!("Hoover et al. 1996 at T = {tolerance}: per image, truth faces and how they came out");
+    println!(
+        "{:<40} {:>6} {:>7} {:>8} {:>5} {:>6} {:>7} {:>6} {:>10}",
+        "image", "faces", "regions", "correct", "over", "under", "missed", "noise", "angle deg"
+    );
+    let row = |name: &str, s: [f64; 7], angle: f64| {
+        println!(
+            "{:<40} {:>6.1} {:>7.1} {:>8.1} {:>5.1} {:>6.1} {:>7.1} {:>6.1} {:>10.2}",
+            name, s[0], s[1], s[2], s[3], s[4], s[5], s[6], angle
+        )
+    };
+    for (name, s) in &rows {
+        let c = |v: usize| v as f64;
+        let short = name.rsplit('/').next().unwrap_or(name);
+        row(
+            short,
+            [c(s.truth_faces), c(s.machine_regions), c(s.correct), c(s.over), c(s.under), c(s.missed), c(s.noise)],
+            eval::mean_std(&s.angle_errors.iter().map(|a| a.error_deg).collect::<Vec<_>>()).0,
+        );
+    }
+    let m = &summary;
+    row(
+        "mean",
+        [m.truth_faces, m.machine_regions, m.correct, m.over, m.under, m.missed, m.noise],
+        m.angle_error_mean_deg,
+    );
+    println!(
+        "correct {:.1} of {:.1} faces per image ({:.0} %), fewest in one image {}; angle error mean {:.2} deg, max {:.2} over {} pairs",
+        m.correct,
+        m.truth_faces,
+        100.0 * m.correct / m.truth_faces,
+        m.correct_min,
+        m.angle_error_mean_deg,
+        m.angle_error_max_deg,
+        m.angle_pairs
     );
     Ok(())
 }

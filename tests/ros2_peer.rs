@@ -66,10 +66,11 @@ fn a_ros_2_peer_on_rmw_zenoh_sees_polymap_s_topics_graph_and_services_and_feeds_
     let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
 
     // Every topic arrives on the peer's own rmw_zenoh keys, each sample with an attachment
-    // whose sequence numbers count up by one per publisher. polymap's own topics lose
-    // nothing; the camera's streams may drop a sample when the machine is loaded (they are
-    // sent drop-on-congestion, as realsense-ros's are with rmw_zenoh: a stale IMU sample is
-    // worth less than a late one).
+    // whose sequence numbers count up by one per publisher. `map_updates` is keep-all (the
+    // publisher waits): it loses nothing. Every other topic is keep-last and, as with
+    // rmw_zenoh, is sent drop-on-congestion, so a loaded machine may lose a few samples (CI
+    // once lost one of 14 markers): a stale sample is worth less than a late one, and the
+    // latched map and markers are complete in each sample.
     for (topic, s) in v["streams"].as_object().unwrap() {
         // Status each second, the whole map and its markers at most each second when the
         // map changed; the rest every frame or five times a second (the terrain).
@@ -85,10 +86,10 @@ fn a_ros_2_peer_on_rmw_zenoh_sees_polymap_s_topics_graph_and_services_and_feeds_
         assert!(count >= least, "{topic}: {s}");
         assert_eq!(s["bad_attachments"], 0, "{topic}: {s}");
         let gaps = s["gaps"].as_u64().unwrap();
-        if topic.starts_with("/polymap") {
+        if topic.ends_with("/map_updates") {
             assert_eq!(gaps, 0, "{topic}: {s}");
         } else {
-            assert!(gaps * 10 <= count, "{topic}: {s}");
+            assert!(gaps <= 1 + count / 10, "{topic}: {s}");
         }
     }
     assert_eq!(v["image_first"]["width"], 320);

@@ -8,6 +8,7 @@
 //! the truth polygon the camera sees.
 
 pub mod map;
+pub mod segmentation;
 
 use nalgebra::{Isometry3, Point3};
 use serde::Serialize;
