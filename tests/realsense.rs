@@ -44,7 +44,7 @@ fn the_library_loaded_is_librealsense_2_54() {
 /// another works the CPU: librealsense's pipeline can drop a frame set of a two-stream playback when its
 /// reader outruns the consumer, even off real time (librealsense issue 9022), and on a
 /// two-core machine running the other tests beside it, it did (19 of 27 IR pairs, once in
-/// three CI runs). One playback at a time gets every frame.
+/// three CI runs). One playback at a time loses fewer (25 of 27 once), not none.
 static PLAYBACK: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
@@ -165,7 +165,7 @@ fn d435i_recording() -> D435iRecording {
 }
 
 #[test]
-fn a_d435i_recording_comes_back_whole_through_the_d435i_code() {
+fn a_d435i_recording_comes_back_through_the_d435i_code() {
     let _alone = one_at_a_time();
     let rec = d435i_recording();
     let dir = tempfile::tempdir().unwrap();
@@ -194,10 +194,22 @@ fn a_d435i_recording_comes_back_whole_through_the_d435i_code() {
     }
     // Stamps travel as f64 milliseconds: equal to well under a microsecond.
     let same = |a: u64, b: u64| a.abs_diff(b) < 1_000;
+    // librealsense's pipeline syncer can drop a frame set of a two-stream playback on a
+    // loaded machine, even one playback at a time (librealsense issue 9022; CI saw 25 of 27
+    // pairs once): most pairs come back, each once, in order, unchanged.
     for (k, stream) in infra.iter().enumerate() {
-        assert_eq!(stream.len(), rec.ir.len(), "infra{}: every frame, once", k + 1);
-        for ((t, pixels), (want_t, pair)) in stream.iter().zip(&rec.ir) {
-            assert!(same(*t, *want_t), "infra{}: stamp {t} vs {want_t}", k + 1);
+        assert!(
+            stream.len() * 4 >= rec.ir.len() * 3,
+            "infra{}: {} of {} frames came back",
+            k + 1,
+            stream.len(),
+            rec.ir.len()
+        );
+        let mut recorded = rec.ir.iter();
+        for (t, pixels) in stream {
+            let Some((_, pair)) = recorded.find(|(want_t, _)| same(*t, *want_t)) else {
+                panic!("infra{}: stamp {t} is not the recording's, or came back out of order or twice", k + 1)
+            };
             assert!(*pixels == pair[k], "infra{} at {t}: the image changed", k + 1);
         }
     }
