@@ -624,6 +624,56 @@ fn pieces_of_one_plane_cut_apart_by_dropouts_are_joined_into_one_region_and_noth
     assert_eq!(joins, 0);
 }
 
+/// Regions of a `w` x `h` strip cut by boundary columns `cuts` (each 6 wide, the middle
+/// four without depth), fitted and joined; `depth_of(column)` picks each column's plane.
+fn join_strip(
+    w: usize,
+    h: usize,
+    cuts: &[usize],
+    depth_of: impl Fn(usize, usize) -> f32,
+) -> (usize, polymap::extract::segment::Segmentation, Vec<Option<ransac::PlaneFit>>) {
+    use polymap::extract::segment::Segmentation;
+    let i = intr(w as u32, h as u32);
+    let cut = |u: usize| cuts.iter().any(|&c| (c..c + 6).contains(&u));
+    let depth = Grid {
+        width: w,
+        height: h,
+        data: (0..w * h)
+            .map(|k| if cuts.iter().any(|&c| (c + 1..c + 5).contains(&(k % w))) { 0.0 } else { depth_of(k % w, k) })
+            .collect(),
+    };
+    let boundary = Grid { width: w, height: h, data: (0..w * h).map(|k| u8::from(cut(k % w))).collect() };
+    let mut seg = Segmentation::components(&boundary, 30);
+    assert_eq!(seg.pixels.len(), cuts.len() + 1);
+    let all: Vec<usize> = (0..seg.pixels.len()).collect();
+    let batch = seg.points(&all, &depth, &i);
+    let mut fits = ransac::fit_planes(&batch, 64, 0.01);
+    let joins = seg.join_coplanar(&mut fits, &depth, &i, 0.03, 0.01, 0.9);
+    (joins, seg, fits)
+}
+
+#[test]
+fn a_strip_cut_into_four_pieces_joins_into_one_and_a_neighbour_s_sliver_stays_out() {
+    // The nearest tread at the image's bottom edge, 10 rows tall, cut three times: the
+    // pairs A-B, B-C, C-D are found before any join, and after A took B, B-C is A-C.
+    let (w, h) = (240, 10);
+    let i = intr(w as u32, h as u32);
+    let tread = Vector3::new(0.0, -0.8, -0.6).normalize();
+    let near = plane_depth(&i, tread, 1.2);
+    let (joins, seg, fits) = join_strip(w, h, &[55, 115, 175], |_, k| near.data[k]);
+    assert_eq!(joins, 3, "four pieces, one region");
+    assert_eq!(seg.pixels.iter().filter(|p| !p.is_empty()).count(), 1);
+    assert_eq!(fits.iter().flatten().count(), 1);
+    // A sliver of a parallel surface 1.5 cm further beside a large piece: under a tenth of
+    // the union, so the union alone would pass the 90 % inlier test; the sliver is not on
+    // the joined plane, so it stays out.
+    let i = intr(260, h as u32);
+    let (near, further) = (plane_depth(&i, tread, 1.2), plane_depth(&i, tread, 1.215));
+    let (joins, seg, _) = join_strip(260, h, &[230], |u, k| if u >= 236 { further.data[k] } else { near.data[k] });
+    assert_eq!(joins, 0, "the sliver is not swallowed");
+    assert!(seg.pixels.iter().all(|p| !p.is_empty()));
+}
+
 #[test]
 fn a_plane_s_reported_covariance_is_the_spread_of_its_fits_over_noisy_draws() {
     use polymap::extract::uncertainty::plane_uncertainty;
@@ -714,4 +764,42 @@ fn the_same_pixels_three_times_further_give_the_same_tilt_and_three_times_the_of
     let (near, far) = (sigma(facing, 1.0), sigma(facing, 3.0));
     assert!(far.1 > 2.5 * near.1, "near {near:?}, far {far:?}");
     assert!((far.0 / near.0 - 1.0).abs() < 0.1, "near {near:?}, far {far:?}");
+}
+
+#[test]
+fn a_strip_that_took_in_two_rows_of_the_riser_is_two_surfaces_and_a_clean_one_is_one() {
+    use polymap::extract::polygon::MAX_HALVES_BEND_DEG;
+    use polymap::extract::uncertainty::halves_agreement;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    // A tread 0.3 m below the camera, seen 1 m ahead as a strip 4 cm deep (the image's top
+    // edge cuts it), in 4 mm rows; 1 mm of noise. `riser` rows beyond its back edge go up
+    // the riser, 3 mm each: all within the 1 cm inlier band of the tread's plane.
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let noise = Normal::new(0.0, 0.001).unwrap();
+    let mut strip = |riser: usize| -> Vec<[f32; 3]> {
+        let mut pts = Vec::new();
+        for x in 0..100 {
+            let x = x as f32 * 0.003 - 0.15;
+            for row in 0..10 {
+                pts.push([x, 0.3 + noise.sample(&mut rng), 1.0 + row as f32 * 0.004]);
+            }
+            for row in 1..=riser {
+                pts.push([x, 0.3 - row as f32 * 0.003, 1.04 + noise.sample(&mut rng)]);
+            }
+        }
+        pts
+    };
+    let bend_of = |pts: &[[f32; 3]]| {
+        let fit = ransac::refit(pts, [0.0, -1.0, 0.0], 0.3, 0.01).unwrap();
+        assert!(fit.inlier_ratio() > 0.95, "one plane by the inlier test: {fit:?}");
+        (fit, halves_agreement(pts, &fit, 0.01).expect("both halves fix a plane"))
+    };
+    let (fit, clean) = bend_of(&strip(0));
+    assert!(clean.one_surface(MAX_HALVES_BEND_DEG.to_radians()), "{clean:?}");
+    assert!(fit.normal.y < -0.9999, "the clean strip's plane is level: {:?}", fit.normal);
+    let (fit, mixed) = bend_of(&strip(2));
+    assert!(!mixed.one_surface(MAX_HALVES_BEND_DEG.to_radians()), "{mixed:?}");
+    assert!(mixed.angle_rad > 10.0 * mixed.sigma_rad, "far beyond the noise: {mixed:?}");
+    assert!(fit.normal.y > -0.9998, "and its fit is tilted by over a degree: {:?}", fit.normal);
 }

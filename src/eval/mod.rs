@@ -35,6 +35,9 @@ pub struct TreadScore {
     pub alpha_deg: Option<f64>,
     /// World z of the polygon's centroid, m (when found).
     pub height: Option<f64>,
+    /// The standard deviation of the polygon's normal along its worst axis, as its
+    /// plane uncertainty reports it, degrees (when found): what alpha is held against.
+    pub tilt_sigma_deg: Option<f64>,
 }
 
 /// A polygon counts as the tread when it overlaps it at least this much.
@@ -75,6 +78,7 @@ pub fn score_frame(
             iou,
             alpha_deg: world.as_ref().map(|p| p.normal[2].clamp(-1.0, 1.0).acos().to_degrees()),
             height: world.as_ref().map(|p| p.centroid()[2]),
+            tilt_sigma_deg: found.then(|| polygons[k].uncertainty.tilt_sigma_rad().to_degrees()),
         });
     }
     scores

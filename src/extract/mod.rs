@@ -323,7 +323,39 @@ pub fn segment_and_fit(
     seg.join_coplanar(&mut fits, depth, intr, cfg.depth_edge_ratio as f32, dist, min_ratio);
     let accepted: Vec<bool> = fits.iter().map(|f| f.is_some_and(|f| f.inlier_ratio() >= min_ratio)).collect();
     seg.grow(&fits, &accepted, depth, intr, dist, cfg.region_grow_px);
+    refit_grown(&seg, &mut fits, &accepted, depth, intr, dist, min_ratio);
     let regions = contours::trace(&seg, cfg.simplify_tolerance_px);
     times.contours += lap();
     Ok((seg, regions, fits))
+}
+
+/// Fits each accepted region's plane again on its grown pixels. Growth gives a region back
+/// the band along its border that edges and closing ate; for a thin strip (a tread cut by
+/// the image's edge, ten rows tall) that band doubles its support across, and the plane
+/// fitted without it can be tilted by a degree.
+fn refit_grown(
+    seg: &Segmentation,
+    fits: &mut [Option<PlaneFit>],
+    accepted: &[bool],
+    depth: &Grid<f32>,
+    intr: &Intrinsics,
+    dist: f32,
+    min_ratio: f64,
+) {
+    use rayon::prelude::*;
+    let grown: Vec<usize> = (0..fits.len()).filter(|&r| accepted[r]).collect();
+    let batch = seg.points(&grown, depth, intr);
+    let refits: Vec<Option<PlaneFit>> = grown
+        .par_iter()
+        .zip(&batch.ranges)
+        .map(|(&r, range)| {
+            let f = fits[r]?;
+            cpu::ransac::refit(&batch.points[range.clone()], f.normal_f32(), f.offset as f32, dist)
+        })
+        .collect();
+    for (&r, new) in grown.iter().zip(refits) {
+        if let Some(new) = new.filter(|f| f.inlier_ratio() >= min_ratio) {
+            fits[r] = Some(new);
+        }
+    }
 }

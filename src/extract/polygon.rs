@@ -9,7 +9,7 @@ use super::contours::Region;
 use super::cpu::ransac::PlaneFit;
 use super::segment::Segmentation;
 use super::trim;
-use super::uncertainty::{PlaneUncertainty, plane_uncertainty};
+use super::uncertainty::{PlaneUncertainty, halves_agreement, plane_uncertainty};
 use crate::config::PipelineConfig;
 use crate::grid::Grid;
 use crate::ring::ring_area;
@@ -181,7 +181,9 @@ pub fn build_polygons(
             .unzip();
         p.area = ring_area(&p.boundary, &n) - p.holes.iter().map(|h| ring_area(h, &n)).sum::<f64>();
     }
-    // Kept: big enough, and a plane its inliers fix (not all on a line).
+    // Kept: big enough, and a plane its inliers fix well (not all on a line, not a
+    // normal too uncertain to stand on, not two surfaces fitted as one). A plane that
+    // fails is held back, not refitted: its pixels do not hold a better one.
     let keep: Vec<bool> = out
         .iter_mut()
         .zip(&plane_fits)
@@ -190,11 +192,29 @@ pub fn build_polygons(
             if p.area < cfg.min_polygon_area_m2 {
                 return false;
             }
-            match plane_uncertainty(pts, fit, cfg.ransac_inlier_distance_m) {
-                Some(u) => {
-                    p.uncertainty = u;
-                    true
+            let dist = cfg.ransac_inlier_distance_m;
+            match plane_uncertainty(pts, fit, dist) {
+                Some(u) if u.tilt_sigma_rad() > MAX_TILT_SIGMA_DEG.to_radians() => {
+                    tracing::debug!(
+                        "polygon of {} px held back: its normal is known to {:.2} deg only",
+                        p.pixel_count,
+                        u.tilt_sigma_rad().to_degrees()
+                    );
+                    false
                 }
+                Some(u) => match halves_agreement(pts, fit, dist) {
+                    Some(h) if h.one_surface(MAX_HALVES_BEND_DEG.to_radians()) => {
+                        p.uncertainty = u;
+                        true
+                    }
+                    h => {
+                        tracing::debug!(
+                            "polygon of {} px held back: its halves are not one plane ({h:?})",
+                            p.pixel_count
+                        );
+                        false
+                    }
+                },
                 None => {
                     tracing::debug!("polygon of {} px: its inliers do not fix a plane", p.pixel_count);
                     false
@@ -225,6 +245,17 @@ pub fn build_polygons(
     }
     out
 }
+
+/// A polygon whose normal has a larger standard deviation (worst axis) is held back:
+/// two sigma of it would pass the one-degree bar a foot can stand on.
+pub const MAX_TILT_SIGMA_DEG: f64 = 0.5;
+
+/// Two halves of a polygon's inliers may bend by this much, or by their noise's three
+/// sigma if that is more, and still count as one plane. A region that took in a few rows
+/// of its neighbour tilts by a fifth to a quarter of its halves' bend (on the mock stairs'
+/// partial views: bends of 2.5, 3.2, 7.4, 9.4, 13 and 21 deg tilted the whole fit by 0.5,
+/// 0.7, 1.8, 2.3, 2.7 and 4.4 deg), so 4 deg holds back what would pass the 1 deg bar.
+pub const MAX_HALVES_BEND_DEG: f64 = 4.0;
 
 /// Outline vertices within this many pixels of the image's edge are on its border.
 pub const BORDER_PX: i64 = 3;

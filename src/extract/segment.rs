@@ -297,8 +297,8 @@ impl Segmentation {
     /// pixels tall, and every dropout's spoiled square of normals cuts it through), into
     /// pieces each too small to keep. Two regions join when they touch across at most
     /// `JOIN_GAP_PX` with no depth step, their planes are within `JOIN_ANGLE_COS`, and
-    /// their union is still one plane: refitted, at least `min_ratio` of its points
-    /// within `dist`. The region joined into keeps the lower index; the other is left
+    /// their union is still one plane: refitted, at least `min_ratio` of each one's points
+    /// within `dist` of it. The region joined into keeps the lower index; the other is left
     /// empty, its fit None. Returns how many joins were made.
     #[allow(clippy::too_many_arguments)]
     pub fn join_coplanar(
@@ -313,22 +313,36 @@ impl Segmentation {
         let rays = Rays::new(depth, intr);
         let mut joins = 0;
         let mut joined_into = vec![false; self.pixels.len()];
+        // Where each region went: itself, or the region it was joined into (a chain).
+        let mut now_in: Vec<usize> = (0..self.pixels.len()).collect();
+        let find = |now_in: &[usize], mut r: usize| {
+            while now_in[r] != r {
+                r = now_in[r];
+            }
+            r
+        };
         for ((a, b), n) in self.steps_between(depth, ratio, JOIN_GAP_PX) {
-            let (a, b) = (a as usize - 1, b as usize - 1);
-            // Pairs are in label order and a region joined away is empty: skip those.
+            // A pair met before one of its regions was joined away is a pair of what they
+            // are now part of: a strip cut into pieces A B C joins A+B, then (A+B)+C.
+            let (a, b) = (find(&now_in, a as usize - 1), find(&now_in, b as usize - 1));
+            let (a, b) = (a.min(b), a.max(b));
             let (Some(fa), Some(fb)) = (fits[a], fits[b]) else { continue };
-            if n < MIN_CREASE_STEPS
-                || self.pixels[a].is_empty()
-                || self.pixels[b].is_empty()
-                || fa.normal.dot(&fb.normal) < JOIN_ANGLE_COS
-            {
+            if a == b || n < MIN_CREASE_STEPS || fa.normal.dot(&fb.normal) < JOIN_ANGLE_COS {
                 continue;
             }
-            let pts: Vec<[f32; 3]> =
-                self.pixels[a].iter().chain(&self.pixels[b]).filter_map(|&i| rays.point(i as usize, depth)).collect();
+            let points_of = |r: usize| self.pixels[r].iter().filter_map(|&i| rays.point(i as usize, depth));
+            let mut pts: Vec<[f32; 3]> = points_of(a).collect();
+            let na = pts.len();
+            pts.extend(points_of(b));
             let start = if fa.points >= fb.points { fa } else { fb };
             let Some(joined) = refit(&pts, start.normal_f32(), start.offset as f32, dist) else { continue };
-            if joined.inlier_ratio() < min_ratio {
+            // Each piece on the joined plane, not just their sum: a large region would
+            // otherwise swallow a small piece of a neighbouring surface within its outliers.
+            let nb = pts.len() - na;
+            let on_plane = |pts: &[[f32; 3]]| pts.iter().filter(|p| joined.distance(p) < dist as f64).count();
+            if on_plane(&pts[..na]) < (min_ratio * na as f64).ceil() as usize
+                || on_plane(&pts[na..]) < (min_ratio * nb as f64).ceil() as usize
+            {
                 continue;
             }
             let moved = std::mem::take(&mut self.pixels[b]);
@@ -338,6 +352,7 @@ impl Segmentation {
             self.pixels[a].extend(moved);
             self.pixels[a].sort_unstable();
             (fits[a], fits[b]) = (Some(joined), None);
+            now_in[b] = a;
             joined_into[a] = true;
             joins += 1;
         }
@@ -396,10 +411,14 @@ impl Segmentation {
 }
 
 /// Regions of one plane cut apart by at most this many pixels are joined (a dropout's
-/// spoiled square of normals, sealed: about the normal kernel and the seal).
-const JOIN_GAP_PX: usize = 8;
-/// Planes of regions that may join are within this (cos of 3 deg).
-const JOIN_ANGLE_COS: f64 = 0.9986;
+/// spoiled square of normals, sealed by the closing: up to the normal kernel plus the
+/// closing's side, 5 + 7 px at the defaults).
+const JOIN_GAP_PX: usize = 12;
+/// Planes of regions that may join are within this (cos of 10 deg). Loose on purpose: the
+/// pieces of a strip ten rows tall are fitted on a few rows each, and tilt by up to 7 deg
+/// (the nearest tread of mock_frames/straight_320 frame 26); the refit of their union,
+/// which each piece must lie on, is what decides.
+const JOIN_ANGLE_COS: f64 = 0.985;
 
 /// How far around a region, per wave of growth, its plane competes for pixels: far
 /// enough to cover the edge band between two regions even where neither can grow

@@ -131,3 +131,46 @@ pub fn plane_uncertainty(points: &[[f32; 3]], fit: &PlaneFit, dist: f64) -> Opti
 
 /// The most points the covariance sums run over (see `plane_uncertainty`).
 const MAX_POINTS: usize = 2048;
+
+/// How two halves of a plane's inliers agree, when cut across their narrowest in-plane
+/// direction: the angle between the planes fitted to each half, and the standard deviation
+/// that angle has when both halves are one plane with noise (their tilt sigmas combined).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HalvesAgreement {
+    pub angle_rad: f64,
+    pub sigma_rad: f64,
+}
+
+impl HalvesAgreement {
+    /// Whether the halves are one surface: their angle within 3 sigma of noise, or under
+    /// `floor_rad` (a bend that small tilts the whole plane by less than the bar).
+    pub fn one_surface(&self, floor_rad: f64) -> bool {
+        self.angle_rad <= (3.0 * self.sigma_rad).max(floor_rad)
+    }
+}
+
+/// Cuts the inliers of `fit` in two across their narrowest in-plane direction and fits
+/// each half. The uncertainty of the whole fit assumes one plane plus noise; a region
+/// that straddles a crease (a strip of tread seen at the image's edge, with two rows of the
+/// riser below it) breaks that assumption, and its covariance is then far too small: its
+/// halves disagree by many sigmas. None when a half has too few points to fix a plane
+/// (the support is too narrow to test, or to trust).
+pub fn halves_agreement(points: &[[f32; 3]], fit: &PlaneFit, dist: f64) -> Option<HalvesAgreement> {
+    let stride = points.len().div_ceil(MAX_POINTS).max(1);
+    let inliers: Vec<[f32; 3]> = points.iter().step_by(stride).filter(|p| fit.distance(p) < dist).copied().collect();
+    let v = |p: &[f32; 3]| Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+    let c = inliers.iter().map(v).sum::<Vector3<f64>>() / inliers.len().max(1) as f64;
+    let scatter = inliers.iter().map(|p| (v(p) - c) * (v(p) - c).transpose()).sum::<Matrix3<f64>>();
+    // The in-plane direction of least spread: the middle eigenvector of the scatter.
+    let eig = SymmetricEigen::new(scatter);
+    let mut order = [0, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
+    let across: Vector3<f64> = eig.eigenvectors.column(order[1]).into();
+    let (low, high): (Vec<[f32; 3]>, Vec<[f32; 3]>) = inliers.iter().partition(|p| (v(p) - c).dot(&across) < 0.0);
+    let half = |pts: &[[f32; 3]]| {
+        let f = super::cpu::ransac::refit(pts, fit.normal_f32(), fit.offset as f32, dist as f32)?;
+        Some((f.normal, plane_uncertainty(pts, &f, dist)?.tilt_sigma_rad()))
+    };
+    let ((na, sa), (nb, sb)) = (half(&low)?, half(&high)?);
+    Some(HalvesAgreement { angle_rad: na.dot(&nb).clamp(-1.0, 1.0).acos(), sigma_rad: sa.hypot(sb) })
+}
