@@ -574,7 +574,6 @@ fn bench_runs_the_cpu_stages_on_the_threads_it_is_given() {
 
 #[test]
 fn pieces_of_one_plane_cut_apart_by_dropouts_are_joined_into_one_region_and_nothing_else_is() {
-    use polymap::extract::segment::Segmentation;
     use polymap::grid::label_components;
     // A 160 x 12 strip of a tread seen from 1.2 m (the nearest tread, cut by the image's
     // bottom edge), columns 70..76 spoiled by dropouts (no depth in 71..75). `right` makes
@@ -584,27 +583,10 @@ fn pieces_of_one_plane_cut_apart_by_dropouts_are_joined_into_one_region_and_noth
     let run = |right: Option<(Vector3<f64>, f64)>| {
         let left = plane_depth(&i, tread, 1.2);
         let other = right.map(|(n, d)| plane_depth(&i, n, d));
-        let w = 160;
-        let mut depth = left.clone();
-        for (k, z) in depth.data.iter_mut().enumerate() {
-            if k % w >= 73
-                && let Some(o) = &other
-            {
-                *z = o.data[k];
-            }
-            if (71..75).contains(&(k % w)) {
-                *z = 0.0;
-            }
-        }
-        let boundary =
-            Grid { width: w, height: 12, data: (0..w * 12).map(|k| u8::from((70..76).contains(&(k % w)))).collect() };
-        let mut seg = Segmentation::components(&boundary, 30);
-        assert_eq!(seg.pixels.len(), 2);
-        let batch = seg.points(&[0, 1], &depth, &i);
-        let mut fits = ransac::fit_planes(&batch, 64, 0.01);
-        assert!(fits.iter().all(|f| f.is_some_and(|f| f.inlier_ratio() > 0.95)), "each piece is a plane");
-        let joins = seg.join_coplanar(&mut fits, &depth, &i, 0.03, 0.01, 0.9);
-        (joins, seg, fits)
+        join_strip(160, 12, &[70], |u, k| match &other {
+            Some(o) if u >= 73 => o.data[k],
+            _ => left.data[k],
+        })
     };
     let (joins, seg, fits) = run(None);
     assert_eq!(joins, 1);
@@ -648,6 +630,7 @@ fn join_strip(
     let all: Vec<usize> = (0..seg.pixels.len()).collect();
     let batch = seg.points(&all, &depth, &i);
     let mut fits = ransac::fit_planes(&batch, 64, 0.01);
+    assert!(fits.iter().all(|f| f.is_some_and(|f| f.inlier_ratio() > 0.95)), "each piece is a plane");
     let joins = seg.join_coplanar(&mut fits, &depth, &i, 0.03, 0.01, 0.9);
     (joins, seg, fits)
 }
