@@ -22,8 +22,8 @@ fn bench(c: &mut Criterion) {
         let size = format!("{width}x{}", intr.height);
         let depth = depth_metres(&frame, &intr).unwrap();
         let kappa = cfg.diffusion_kappa_m as f32;
-        c.bench_function(&format!("cpu diffusion {size}"), |b| b.iter(|| diffusion::diffuse(&depth, 60, kappa, 0.2)));
-        let smoothed = diffusion::diffuse(&depth, 60, kappa, 0.2);
+        c.bench_function(&format!("cpu diffusion {size}"), |b| b.iter(|| diffusion::diffuse(&depth, 12.0, 4, kappa)));
+        let smoothed = diffusion::diffuse(&depth, 12.0, 4, kappa);
         c.bench_function(&format!("cpu normals {size}"), |b| b.iter(|| normals::normals(&smoothed, &intr, 5)));
         let n = normals::normals(&smoothed, &intr, 5);
         c.bench_function(&format!("cpu edges {size}"), |b| {

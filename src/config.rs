@@ -247,12 +247,12 @@ pub enum Backend {
 #[serde(deny_unknown_fields, default)]
 pub struct PipelineConfig {
     pub backend: Backend,
-    /// Perona-Malik iterations.
-    pub diffusion_iterations: u32,
+    /// Perona-Malik diffusion time, in the reference's units (its 60 explicit steps of 0.2: 12).
+    pub diffusion_time: f64,
+    /// Semi-implicit steps taking that time (stable at any length; 0 = no diffusion).
+    pub diffusion_steps: u32,
     /// Edge-stopping constant of c = exp(-(|grad|/kappa)^2), m.
     pub diffusion_kappa_m: f64,
-    /// Step size per iteration (stable for <= 0.25 with 4 neighbours).
-    pub diffusion_gamma: f64,
     /// Sobel kernel size for normals: 3, 5 or 7.
     pub normal_kernel: u32,
     /// Canny thresholds on the normal field's gradient, unitless (change of the unit normal per pixel).
@@ -280,9 +280,9 @@ impl Default for PipelineConfig {
     fn default() -> Self {
         PipelineConfig {
             backend: Backend::Auto,
-            diffusion_iterations: 60,
+            diffusion_time: 12.0,
+            diffusion_steps: 4,
             diffusion_kappa_m: 0.0335,
-            diffusion_gamma: 0.2,
             normal_kernel: 5,
             canny_low: 0.05,
             canny_high: 0.1,
@@ -571,14 +571,9 @@ impl Config {
         }
 
         let p = &self.pipeline;
-        check_range("pipeline.diffusion_iterations", p.diffusion_iterations as f64, 0.0, 1000.0)?;
+        check_range("pipeline.diffusion_time", p.diffusion_time, 0.0, 1000.0)?;
+        check_range("pipeline.diffusion_steps", p.diffusion_steps as f64, 0.0, 100.0)?;
         check_range("pipeline.diffusion_kappa_m", p.diffusion_kappa_m, 1e-4, 10.0)?;
-        if !(p.diffusion_gamma > 0.0 && p.diffusion_gamma <= 0.25) {
-            return Err((
-                "pipeline.diffusion_gamma".into(),
-                format!("{} must be in (0, 0.25]: larger steps make 4-neighbour diffusion unstable", p.diffusion_gamma),
-            ));
-        }
         if ![3, 5, 7].contains(&p.normal_kernel) {
             return Err(("pipeline.normal_kernel".into(), format!("{} must be 3, 5 or 7", p.normal_kernel)));
         }

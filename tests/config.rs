@@ -20,7 +20,7 @@ fn error(text: &str) -> ConfigError {
 fn default_toml_documents_exactly_the_defaults() {
     let c = Config::load(Path::new(env!("CARGO_MANIFEST_DIR")).join("config/default.toml")).unwrap();
     assert_eq!(c, Config::default());
-    assert_eq!(c.pipeline.diffusion_iterations, 60);
+    assert_eq!(c.pipeline.diffusion_time, 60.0 * 0.2, "the reference's 60 explicit steps of 0.2");
     assert!((c.pipeline.diffusion_kappa_m - 134.0 * 0.00025).abs() < 1e-12, "kappa is the reference's 134 units");
 }
 
@@ -70,7 +70,8 @@ fn out_of_range_value_names_key_and_reason() {
 #[test]
 fn each_impossible_value_is_caught() {
     let cases = [
-        ("[pipeline]\ndiffusion_gamma = 0.5", "pipeline.diffusion_gamma", "unstable"),
+        ("[pipeline]\ndiffusion_time = -1", "pipeline.diffusion_time", "within"),
+        ("[pipeline]\ndiffusion_steps = 1000", "pipeline.diffusion_steps", "within"),
         ("[pipeline]\nnormal_kernel = 4", "pipeline.normal_kernel", "3, 5 or 7"),
         ("[pipeline]\ncanny_low = 0.3\ncanny_high = 0.2", "pipeline.canny_low", "canny_high"),
         ("[pipeline]\nclosing_kernel_px = 12", "pipeline.closing_kernel_px", "odd"),
@@ -104,13 +105,13 @@ fn unknown_key_is_rejected_by_name() {
 
 #[test]
 fn wrong_type_and_bad_enum_name_their_key() {
-    let e = error("[pipeline]\ndiffusion_iterations = \"sixty\"\n");
-    assert_eq!(e.key, "pipeline.diffusion_iterations", "{e}");
+    let e = error("[pipeline]\ndiffusion_steps = \"three\"\n");
+    assert_eq!(e.key, "pipeline.diffusion_steps", "{e}");
     let e = error("[pipeline]\nbackend = \"tpu\"\n");
     assert_eq!(e.key, "pipeline.backend", "{e}");
     assert!(e.reason.contains("tpu"), "{e}");
-    let e = error("[pipeline]\ndiffusion_iterations = -3\n");
-    assert_eq!(e.key, "pipeline.diffusion_iterations", "{e}");
+    let e = error("[pipeline]\ndiffusion_steps = -3\n");
+    assert_eq!(e.key, "pipeline.diffusion_steps", "{e}");
 }
 
 #[test]

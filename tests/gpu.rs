@@ -55,10 +55,12 @@ fn image_stages_agree_with_the_cpu_twin_on_every_mock_sequence() {
     let cfg = PipelineConfig::default();
     for (name, seq, k) in mock_frames(5) {
         let depth = depth_metres(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
-        let g = gpu.image_stages(&depth, &seq.intrinsics, 60, cfg.diffusion_kappa_m as f32, 0.2, 5, 0.05, 0.1).unwrap();
-        let smoothed = diffusion::diffuse(&depth, 60, cfg.diffusion_kappa_m as f32, 0.2);
+        let g = gpu.image_stages(&depth, &seq.intrinsics, &cfg).unwrap();
+        let smoothed =
+            diffusion::diffuse(&depth, cfg.diffusion_time as f32, cfg.diffusion_steps, cfg.diffusion_kappa_m as f32);
         let d = max_abs_diff(&g.smoothed.data, &smoothed.data);
-        assert!(d <= 1e-4, "{name} frame {k}: diffusion differs by {d} m");
+        // A few ulps of depth (0.5 µm when written): the GPU may fuse multiply-adds.
+        assert!(d <= 2e-6, "{name} frame {k}: diffusion differs by {d} m");
         // Zeros (invalid) must agree exactly: holes are never filled by either twin.
         assert!(g.smoothed.data.iter().zip(&smoothed.data).all(|(a, b)| (*a == 0.0) == (*b == 0.0)));
 

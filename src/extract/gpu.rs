@@ -12,6 +12,7 @@ use wgpu::util::DeviceExt;
 use super::Grid;
 use super::cpu::normals::sobel_kernel;
 use super::cpu::ransac::{MAX_SCORE_POINTS, PointBatch};
+use crate::config::PipelineConfig;
 use crate::types::Intrinsics;
 
 /// Why the GPU backend could not start or run.
@@ -31,6 +32,23 @@ pub enum GpuError {
     Readback(String),
 }
 
+/// The uniform of shaders/diffusion.wgsl, field by field its `DiffusionParams`: one
+/// pass of implicit solves along every row or every column of the image.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct DiffusionParams {
+    /// Pixels along a line.
+    pub len: u32,
+    pub lines: u32,
+    /// Index of line k's first pixel: k * line_stride.
+    pub line_stride: u32,
+    /// From one pixel of a line to the next.
+    pub elem_stride: u32,
+    /// The step's time.
+    pub step: f32,
+    pub inv_kappa: f32,
+}
+
 /// A compute pipeline and the layout of its group 0.
 struct Stage {
     pipeline: wgpu::ComputePipeline,
@@ -42,6 +60,8 @@ struct ImageBuffers {
     width: u32,
     height: u32,
     depth: [wgpu::Buffer; 2],
+    /// The diffusion's elimination factors.
+    factor: wgpu::Buffer,
     normals: wgpu::Buffer,
     magnitude: wgpu::Buffer,
     sector: wgpu::Buffer,
@@ -215,6 +235,7 @@ impl Gpu {
                 width,
                 height,
                 depth: [self.storage("depth a", n * 4), self.storage("depth b", n * 4)],
+                factor: self.storage("diffusion factors", n * 4),
                 normals: self.storage("normals", n * 12),
                 magnitude: self.storage("magnitude", n * 4),
                 sector: self.storage("sector", n * 4),
@@ -225,18 +246,14 @@ impl Gpu {
     }
 
     /// Diffusion, normals, and the per-pixel half of Canny for one depth image (m).
-    #[allow(clippy::too_many_arguments)]
     pub fn image_stages(
         &mut self,
         depth: &Grid<f32>,
         intr: &Intrinsics,
-        iterations: u32,
-        kappa: f32,
-        gamma: f32,
-        kernel: u32,
-        low: f32,
-        high: f32,
+        cfg: &PipelineConfig,
     ) -> Result<ImageStages, GpuError> {
+        let kernel = cfg.normal_kernel;
+        let (low, high) = (cfg.canny_low as f32, cfg.canny_high as f32);
         let (w, h) = (depth.width as u32, depth.height as u32);
         let n = w as u64 * h as u64;
         let groups = [w.div_ceil(16), h.div_ceil(16)];
@@ -246,17 +263,23 @@ impl Gpu {
         self.queue.write_buffer(&b.depth[0], 0, bytemuck::cast_slice(&depth.data));
         let upload = lap();
 
-        let params = self.uniform(bytemuck::cast_slice(&[
-            w.to_le_bytes(),
-            h.to_le_bytes(),
-            (1.0 / kappa).to_le_bytes(),
-            gamma.to_le_bytes(),
-        ]));
-        let forward = self.bind(&self.diffusion, &[(0, &params), (1, &b.depth[0]), (2, &b.depth[1])]);
-        let backward = self.bind(&self.diffusion, &[(0, &params), (1, &b.depth[1]), (2, &b.depth[0])]);
-        let steps: Vec<_> = (0..iterations).map(|k| (if k % 2 == 0 { &forward } else { &backward }, groups)).collect();
-        self.run(&self.diffusion, &steps)?;
-        let smoothed_buf = &b.depth[(iterations % 2) as usize];
+        // A step: rows from depth a into b, then columns from b back into a.
+        let steps = if cfg.diffusion_time > 0.0 { cfg.diffusion_steps } else { 0 };
+        let step = cfg.diffusion_time as f32 / steps.max(1) as f32;
+        let inv_kappa = 1.0 / cfg.diffusion_kappa_m as f32;
+        let rows = DiffusionParams { len: w, lines: h, line_stride: w, elem_stride: 1, step, inv_kappa };
+        let columns = DiffusionParams { len: h, lines: w, line_stride: 1, elem_stride: w, step, inv_kappa };
+        let (rows_params, columns_params) =
+            (self.uniform(bytemuck::bytes_of(&rows)), self.uniform(bytemuck::bytes_of(&columns)));
+        let along_rows =
+            self.bind(&self.diffusion, &[(0, &rows_params), (1, &b.depth[0]), (2, &b.depth[1]), (3, &b.factor)]);
+        let along_columns =
+            self.bind(&self.diffusion, &[(0, &columns_params), (1, &b.depth[1]), (2, &b.depth[0]), (3, &b.factor)]);
+        let passes: Vec<_> = (0..steps)
+            .flat_map(|_| [(&along_rows, [h.div_ceil(64), 1]), (&along_columns, [w.div_ceil(64), 1])])
+            .collect();
+        self.run(&self.diffusion, &passes)?;
+        let smoothed_buf = &b.depth[0];
         let diffusion = lap();
 
         let (smooth, deriv, norm) = sobel_kernel(kernel);

@@ -204,12 +204,8 @@ pub fn extract_cpu(
     let mut lap = stopwatch();
     let depth = depth_metres(frame, intr)?;
     times.upload = lap();
-    let smoothed = cpu::diffusion::diffuse(
-        &depth,
-        cfg.diffusion_iterations,
-        cfg.diffusion_kappa_m as f32,
-        cfg.diffusion_gamma as f32,
-    );
+    let smoothed =
+        cpu::diffusion::diffuse(&depth, cfg.diffusion_time as f32, cfg.diffusion_steps, cfg.diffusion_kappa_m as f32);
     times.diffusion = lap();
     let normals = cpu::normals::normals(&smoothed, intr, cfg.normal_kernel);
     times.normals = lap();
@@ -233,16 +229,7 @@ pub fn extract_gpu(
     let mut times = StageTimes::default();
     let t0 = Instant::now();
     let depth = depth_metres(frame, intr)?;
-    let out = gpu.image_stages(
-        &depth,
-        intr,
-        cfg.diffusion_iterations,
-        cfg.diffusion_kappa_m as f32,
-        cfg.diffusion_gamma as f32,
-        cfg.normal_kernel,
-        cfg.canny_low as f32,
-        cfg.canny_high as f32,
-    )?;
+    let out = gpu.image_stages(&depth, intr, cfg)?;
     [times.upload, times.diffusion, times.normals, times.edges] = out.times;
     times.upload += t0.elapsed().as_secs_f64() * 1e3 - out.times.iter().sum::<f64>();
     let mut lap = stopwatch();

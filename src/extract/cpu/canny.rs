@@ -324,7 +324,7 @@ mod tests {
                 *z = 0.0;
             }
         }
-        let smoothed = diffusion::diffuse(&depth, 20, 0.0335, 0.2);
+        let smoothed = diffusion::diffuse(&depth, 4.0, 1, 0.0335);
         normals::normals(&smoothed, &intr, 5)
     }
 
