@@ -4,6 +4,7 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use polymap::config::PipelineConfig;
+use polymap::extract::cloud::Cloud;
 use polymap::extract::cpu::{canny, diffusion, normals, ransac};
 use polymap::extract::{depth_metres, extract_cpu, extract_gpu, gpu::Gpu, segment::Segmentation};
 use polymap::synth::{NoiseModel, Scene, SceneKind, noisy_depth, path::trajectory, render};
@@ -37,7 +38,7 @@ fn bench(c: &mut Criterion) {
         c.bench_function(&format!("cpu regions {size}"), |b| b.iter(|| Segmentation::components(&boundary, 30)));
         let seg = Segmentation::components(&boundary, 30);
         let all: Vec<usize> = (0..seg.pixels.len()).collect();
-        let batch = seg.points(&all, &depth, &intr);
+        let batch = seg.points(&all, &Cloud::new(&depth, &intr));
         c.bench_function(&format!("cpu ransac {size}"), |b| b.iter(|| ransac::fit_planes(&batch, 20, 0.01)));
         c.bench_function(&format!("cpu frame {size}"), |b| b.iter(|| extract_cpu(&frame, &intr, &cfg).unwrap()));
         if let Some(g) = gpu.as_mut() {

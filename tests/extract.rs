@@ -3,6 +3,7 @@
 
 use nalgebra::Vector3;
 use polymap::config::PipelineConfig;
+use polymap::extract::cloud::Cloud;
 use polymap::extract::cpu::{canny, diffusion, normals, ransac};
 use polymap::extract::{ExtractError, Grid, extract_cpu};
 use polymap::synth::{NoiseModel, Scene, SceneKind, noisy_depth, path::trajectory, render};
@@ -387,16 +388,16 @@ fn a_region_leaking_across_two_planes_is_split_and_both_are_fitted() {
     let boundary = Grid { width: 160, height: 120, data: vec![0u8; 160 * 120] };
     let mut seg = Segmentation::components(&boundary, 30);
     assert_eq!(seg.pixels.len(), 1);
-    let mut fits = ransac::fit_planes(&seg.points(&[0], &depth, &i), 20, 0.01);
+    let mut fits = ransac::fit_planes(&seg.points(&[0], &Cloud::new(&depth, &i)), 20, 0.01);
     assert!(fits[0].unwrap().inlier_ratio() < 0.9, "one plane cannot fit both surfaces");
-    let pieces = seg.split_leaks(&mut fits, &depth, &i, 0.01, 0.9, 30);
+    let pieces = seg.split_leaks(&mut fits, &Cloud::new(&depth, &i), 0.01, 0.9, 30);
     assert_eq!(
         pieces,
         vec![1],
         "the other surface becomes a new region ({:?})",
         seg.pixels.iter().map(|p| p.len()).collect::<Vec<_>>()
     );
-    let refit = ransac::fit_planes(&seg.points(&pieces, &depth, &i), 20, 0.01);
+    let refit = ransac::fit_planes(&seg.points(&pieces, &Cloud::new(&depth, &i)), 20, 0.01);
     fits[1] = refit[0];
     let kept = fits[0].unwrap();
     assert!(
@@ -431,8 +432,8 @@ fn regions_grow_back_over_their_own_plane_but_not_onto_another() {
         Grid { width: 100, height: 80, data: (0..8000).map(|k| (50..66).contains(&(k % 100)) as u8).collect() };
     let mut seg = Segmentation::components(&boundary, 30);
     assert_eq!(seg.pixels.len(), 2);
-    let fits = ransac::fit_planes(&seg.points(&[0, 1], &depth, &i), 20, 0.01);
-    seg.grow(&fits, &[true, true], &depth, &i, 0.01, 4);
+    let fits = ransac::fit_planes(&seg.points(&[0, 1], &Cloud::new(&depth, &i)), 20, 0.01);
+    seg.grow(&fits, &[true, true], &Cloud::new(&depth, &i), 0.01, 4);
     let columns = |r: usize| {
         let mut c: Vec<u32> = seg.pixels[r].iter().map(|p| p % 100).collect();
         c.sort_unstable();
@@ -479,8 +480,8 @@ fn at_an_inner_corner_each_region_takes_back_only_its_own_surface() {
     let before: Vec<usize> = seg.pixels.iter().map(Vec::len).collect();
     // 2 cm: the wall's lowest rows lie within it of the floor's plane and the floor's
     // highest within it of the wall's; the nearer plane must still win them.
-    let fits = ransac::fit_planes(&seg.points(&[0, 1], &depth, &i), 20, 0.02);
-    seg.grow(&fits, &[true, true], &depth, &i, 0.02, 4);
+    let fits = ransac::fit_planes(&seg.points(&[0, 1], &Cloud::new(&depth, &i)), 20, 0.02);
+    seg.grow(&fits, &[true, true], &Cloud::new(&depth, &i), 0.02, 4);
     for (r, surface) in [(0, true), (1, false)] {
         assert!(seg.pixels[r].len() > before[r], "region {r} grew back over its own surface");
         let strays = seg.pixels[r].iter().filter(|&&k| on_wall[k as usize] != surface).count();
@@ -595,7 +596,7 @@ fn regions_meet_along_a_crease_not_across_a_wide_gap_a_depth_step_or_a_corner() 
         assert_eq!(seg.pixels.len(), if gap == 0 { 1 } else { 2 });
         let depth =
             Grid { width: w, height: h, data: (0..w * h).map(|i| if i % w < 15 { 1.0 } else { 1.0 + far }).collect() };
-        seg.creases(&depth, 0.03).meet(1, 2)
+        seg.creases(&Cloud::new(&depth, &intr(w as u32, h as u32)), 0.03).meet(1, 2)
     };
     assert!(meet(1, 0.0), "a one-pixel edge line between two faces");
     assert!(meet(4, 0.0), "the widest band growth may leave");
@@ -619,7 +620,7 @@ fn regions_meet_along_a_crease_not_across_a_wide_gap_a_depth_step_or_a_corner() 
     }
     let seg = Segmentation { labels, pixels: vec![Vec::new(), Vec::new()] };
     let depth = Grid { width: w, height: h, data: vec![1.0; w * h] };
-    assert!(!seg.creases(&depth, 0.03).meet(1, 2), "a corner is no crease");
+    assert!(!seg.creases(&Cloud::new(&depth, &intr(w as u32, h as u32)), 0.03).meet(1, 2), "a corner is no crease");
 }
 
 #[test]
@@ -698,10 +699,10 @@ fn join_strip(
     let mut seg = Segmentation::components(&boundary, 30);
     assert_eq!(seg.pixels.len(), cuts.len() + 1);
     let all: Vec<usize> = (0..seg.pixels.len()).collect();
-    let batch = seg.points(&all, &depth, &i);
+    let batch = seg.points(&all, &Cloud::new(&depth, &i));
     let mut fits = ransac::fit_planes(&batch, 64, 0.01);
     assert!(fits.iter().all(|f| f.is_some_and(|f| f.inlier_ratio() > 0.95)), "each piece is a plane");
-    let joins = seg.join_coplanar(&mut fits, &depth, &i, 0.03, 0.01, 0.9);
+    let joins = seg.join_coplanar(&mut fits, &Cloud::new(&depth, &i), 0.03, 0.01, 0.9);
     (joins, seg, fits)
 }
 

@@ -5,6 +5,7 @@
 //! -> close -> regions with holes (CPU) -> batched RANSAC + refit -> polygons ray cast
 //! onto their planes. Each image stage has a CPU twin in `cpu/`.
 
+pub mod cloud;
 pub mod contours;
 pub mod cpu;
 pub mod debug;
@@ -21,6 +22,7 @@ use serde::Serialize;
 use crate::config::{Backend, PipelineConfig};
 pub use crate::grid::Grid;
 use crate::types::{DepthFrame, Intrinsics};
+use cloud::Cloud;
 use contours::Region;
 use cpu::ransac::{PlaneFit, PointBatch};
 pub use polygon::{FramePolygons, Polygon, VertexKind, build_polygons};
@@ -269,8 +271,9 @@ fn finish(
         cfg.normal_kernel,
     );
     times.edges += lap();
-    let (seg, regions, fits) = segment_and_fit(&depth, &boundary, intr, cfg, fit, times, lap)?;
-    let polygons = build_polygons(&regions, &fits, &seg, &depth, intr, cfg);
+    let cloud = Cloud::new(&depth, intr);
+    let (seg, regions, fits) = segment_and_fit(&cloud, &boundary, cfg, fit, times, lap)?;
+    let polygons = build_polygons(&regions, &fits, &seg, &depth, &cloud, intr, cfg);
     times.polygons = lap();
     Ok((polygons, Stages { depth, smoothed, normals, canny, boundary, labels: seg.labels, regions, fits }))
 }
@@ -282,9 +285,8 @@ pub type Segmented = (Segmentation, Vec<Region>, Vec<Option<PlaneFit>>);
 /// the backend), leaks split and fitted again, regions grown back to their true
 /// borders, outlines traced. Times the RANSAC calls as `ransac`, the rest as `contours`.
 pub fn segment_and_fit(
-    depth: &Grid<f32>,
+    cloud: &Cloud,
     boundary: &Grid<u8>,
-    intr: &Intrinsics,
     cfg: &PipelineConfig,
     mut fit: impl FnMut(&PointBatch) -> Result<Vec<Option<PlaneFit>>, ExtractError>,
     times: &mut StageTimes,
@@ -294,12 +296,12 @@ pub fn segment_and_fit(
     let min_ratio = cfg.ransac_min_inlier_ratio;
     let mut seg = Segmentation::components(boundary, MIN_REGION_PIXELS);
     let all: Vec<usize> = (0..seg.pixels.len()).collect();
-    let batch = seg.points(&all, depth, intr);
+    let batch = seg.points(&all, cloud);
     times.contours = lap();
     let mut fits = fit(&batch)?;
     times.ransac = lap();
-    let pieces = seg.split_leaks(&mut fits, depth, intr, dist, min_ratio, MIN_REGION_PIXELS);
-    let batch = seg.points(&pieces, depth, intr);
+    let pieces = seg.split_leaks(&mut fits, cloud, dist, min_ratio, MIN_REGION_PIXELS);
+    let batch = seg.points(&pieces, cloud);
     times.contours += lap();
     if !pieces.is_empty() {
         for (r, f) in pieces.iter().zip(fit(&batch)?) {
@@ -307,10 +309,10 @@ pub fn segment_and_fit(
         }
     }
     times.ransac += lap();
-    seg.join_coplanar(&mut fits, depth, intr, cfg.depth_edge_ratio as f32, dist, min_ratio);
+    seg.join_coplanar(&mut fits, cloud, cfg.depth_edge_ratio as f32, dist, min_ratio);
     let accepted: Vec<bool> = fits.iter().map(|f| f.is_some_and(|f| f.inlier_ratio() >= min_ratio)).collect();
-    seg.grow(&fits, &accepted, depth, intr, dist, cfg.region_grow_px);
-    refit_grown(&seg, &mut fits, &accepted, depth, intr, dist, min_ratio);
+    seg.grow(&fits, &accepted, cloud, dist, cfg.region_grow_px);
+    refit_grown(&seg, &mut fits, &accepted, cloud, dist, min_ratio);
     let regions = contours::trace(&seg, cfg.simplify_tolerance_px);
     times.contours += lap();
     Ok((seg, regions, fits))
@@ -324,14 +326,13 @@ fn refit_grown(
     seg: &Segmentation,
     fits: &mut [Option<PlaneFit>],
     accepted: &[bool],
-    depth: &Grid<f32>,
-    intr: &Intrinsics,
+    cloud: &Cloud,
     dist: f32,
     min_ratio: f64,
 ) {
     use rayon::prelude::*;
     let grown: Vec<usize> = (0..fits.len()).filter(|&r| accepted[r]).collect();
-    let batch = seg.points(&grown, depth, intr);
+    let batch = seg.points(&grown, cloud);
     let refits: Vec<Option<PlaneFit>> = grown
         .par_iter()
         .zip(&batch.ranges)

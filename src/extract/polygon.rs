@@ -5,6 +5,7 @@
 use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
+use super::cloud::Cloud;
 use super::contours::Region;
 use super::cpu::ransac::PlaneFit;
 use super::segment::Segmentation;
@@ -106,6 +107,7 @@ pub fn build_polygons(
     fits: &[Option<PlaneFit>],
     seg: &Segmentation,
     depth: &Grid<f32>,
+    cloud: &Cloud,
     intr: &Intrinsics,
     cfg: &PipelineConfig,
 ) -> Vec<Polygon> {
@@ -164,11 +166,11 @@ pub fn build_polygons(
             // Known once the polygon is kept (below): most regions are not.
             uncertainty: PlaneUncertainty::default(),
         });
-        points.push(seg.points(&[region.label as usize - 1], depth, intr).points);
+        points.push(seg.points(&[region.label as usize - 1], cloud).points);
         plane_fits.push(*fit);
         labels.push(region.label);
     }
-    let creases = seg.creases(depth, cfg.depth_edge_ratio as f32);
+    let creases = seg.creases(cloud, cfg.depth_edge_ratio as f32);
     let meet = |a: usize, b: usize| creases.meet(labels[a], labels[b]);
     trim::trim_at_neighbour_planes(&mut out, &points, meet, cfg.ransac_inlier_distance_m);
     for p in &mut out {

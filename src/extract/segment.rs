@@ -15,9 +15,9 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 
 use super::Grid;
+use super::cloud::Cloud;
 use super::cpu::ransac::{PlaneFit, PointBatch, refit};
 use crate::grid::{flood, label_components};
-use crate::types::Intrinsics;
 
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
 #[derive(Clone, Debug)]
@@ -66,12 +66,11 @@ impl Segmentation {
     }
 
     /// Camera-frame points (raw depth, valid pixels only) of the given regions, in that order.
-    pub fn points(&self, regions: &[usize], depth: &Grid<f32>, intr: &Intrinsics) -> PointBatch {
+    pub fn points(&self, regions: &[usize], cloud: &Cloud) -> PointBatch {
         let mut batch = PointBatch::default();
-        let rays = Rays::new(depth, intr);
         for &r in regions {
             let start = batch.points.len();
-            batch.points.extend(self.pixels[r].iter().filter_map(|&i| rays.point(i as usize, depth)));
+            batch.points.extend(self.pixels[r].iter().filter_map(|&i| cloud.point(i as usize)));
             batch.ranges.push(start..batch.points.len());
         }
         batch
@@ -83,14 +82,12 @@ impl Segmentation {
     pub fn split_leaks(
         &mut self,
         fits: &mut Vec<Option<PlaneFit>>,
-        depth: &Grid<f32>,
-        intr: &Intrinsics,
+        cloud: &Cloud,
         dist: f32,
         min_ratio: f64,
         min_pixels: usize,
     ) -> Vec<usize> {
         let (w, h) = (self.labels.width, self.labels.height);
-        let rays = Rays::new(depth, intr);
         let mut new_regions = Vec::new();
         for r in 0..self.pixels.len() {
             let Some(fit) = fits[r] else { continue };
@@ -99,7 +96,7 @@ impl Segmentation {
             }
             let label = r as u32 + 1;
             let inlier = |i: usize| {
-                self.labels.data[i] == label && rays.point(i, depth).is_some_and(|p| fit.distance(&p) < dist as f64)
+                self.labels.data[i] == label && cloud.point(i).is_some_and(|p| fit.distance(&p) < dist as f64)
             };
             let mut seen = vec![false; w * h];
             let mut best: Vec<u32> = Vec::new();
@@ -120,7 +117,7 @@ impl Segmentation {
             for &i in &best {
                 self.labels.data[i as usize] = label;
             }
-            let pts: Vec<[f32; 3]> = best.iter().filter_map(|&i| rays.point(i as usize, depth)).collect();
+            let pts: Vec<[f32; 3]> = best.iter().filter_map(|&i| cloud.point(i as usize)).collect();
             fits[r] = refit(&pts, fit.normal_f32(), fit.offset as f32, dist);
             self.pixels[r] = best;
             let mut seen = vec![false; w * h];
@@ -148,17 +145,8 @@ impl Segmentation {
     /// centimetre lies within `dist` of the tread's plane, and the tread would take it
     /// before the riser got there. Each wave reads the labels of the one before, so
     /// the result does not depend on scan order.
-    pub fn grow(
-        &mut self,
-        fits: &[Option<PlaneFit>],
-        accepted: &[bool],
-        depth: &Grid<f32>,
-        intr: &Intrinsics,
-        dist: f32,
-        waves: u32,
-    ) {
+    pub fn grow(&mut self, fits: &[Option<PlaneFit>], accepted: &[bool], cloud: &Cloud, dist: f32, waves: u32) {
         let (w, h) = (self.labels.width, self.labels.height);
-        let rays = Rays::new(depth, intr);
         let nearby = NearbyRegions::new(self, accepted, (NEARBY_PER_WAVE * waves) as usize);
         let neighbours = |i: usize| {
             let (u, v) = (i % w, i / w);
@@ -180,7 +168,7 @@ impl Segmentation {
                     if !neighbours(i).any(|j| labels[j] != 0) {
                         return None;
                     }
-                    let p = rays.point(i, depth)?;
+                    let p = cloud.point(i)?;
                     let mut best: Option<(f64, u32)> = None;
                     for &l in nearby.around(i % w, i / w) {
                         let Some(fit) = &fits[l as usize - 1] else { continue };
@@ -243,20 +231,20 @@ impl Creases {
 impl Segmentation {
     /// The creases between regions; `ratio` is the depth step, relative to the depth, that
     /// parts two neighbouring pixels (as the boundary map's, per pixel of distance).
-    pub fn creases(&self, depth: &Grid<f32>, ratio: f32) -> Creases {
-        Creases { steps: self.steps_between(depth, ratio, MAX_CREASE_GAP_PX) }
+    pub fn creases(&self, cloud: &Cloud, ratio: f32) -> Creases {
+        Creases { steps: self.steps_between(cloud, ratio, MAX_CREASE_GAP_PX) }
     }
 
     /// For each pair of regions (labels a < b, sorted), how many times a row or a column
     /// steps from one to the other across at most `max_gap` unlabelled pixels with no depth
     /// step (`ratio` per pixel of distance) between the two pixels.
-    fn steps_between(&self, depth: &Grid<f32>, ratio: f32, max_gap: usize) -> Vec<((u32, u32), u32)> {
+    fn steps_between(&self, cloud: &Cloud, ratio: f32, max_gap: usize) -> Vec<((u32, u32), u32)> {
         let (w, h) = (self.labels.width, self.labels.height);
-        let (l, z) = (&self.labels.data, &depth.data);
+        let l = &self.labels.data;
         let mut steps = Vec::new();
         // From labelled pixel i to labelled pixel j, `px` pixels apart, nothing labelled between.
         let mut step = |i: usize, j: usize, px: usize| {
-            let (a, b, zi, zj) = (l[i], l[j], z[i], z[j]);
+            let (a, b, zi, zj) = (l[i], l[j], cloud.depth(i), cloud.depth(j));
             if a != b && zi > 0.0 && zj > 0.0 && (zi - zj).abs() <= ratio * px as f32 * zi.min(zj) {
                 steps.push((a.min(b), a.max(b)));
             }
@@ -300,17 +288,14 @@ impl Segmentation {
     /// their union is still one plane: refitted, at least `min_ratio` of each one's points
     /// within `dist` of it. The region joined into keeps the lower index; the other is left
     /// empty, its fit None. Returns how many joins were made.
-    #[allow(clippy::too_many_arguments)]
     pub fn join_coplanar(
         &mut self,
         fits: &mut [Option<PlaneFit>],
-        depth: &Grid<f32>,
-        intr: &Intrinsics,
+        cloud: &Cloud,
         ratio: f32,
         dist: f32,
         min_ratio: f64,
     ) -> usize {
-        let rays = Rays::new(depth, intr);
         let mut joins = 0;
         let mut joined_into = vec![false; self.pixels.len()];
         // Where each region went: itself, or the region it was joined into (a chain).
@@ -321,7 +306,7 @@ impl Segmentation {
             }
             r
         };
-        for ((a, b), n) in self.steps_between(depth, ratio, JOIN_GAP_PX) {
+        for ((a, b), n) in self.steps_between(cloud, ratio, JOIN_GAP_PX) {
             // A pair met before one of its regions was joined away is a pair of what they
             // are now part of: a strip cut into pieces A B C joins A+B, then (A+B)+C.
             let (a, b) = (find(&now_in, a as usize - 1), find(&now_in, b as usize - 1));
@@ -330,7 +315,7 @@ impl Segmentation {
             if a == b || n < MIN_CREASE_STEPS || fa.normal.dot(&fb.normal) < JOIN_ANGLE_COS {
                 continue;
             }
-            let points_of = |r: usize| self.pixels[r].iter().filter_map(|&i| rays.point(i as usize, depth));
+            let points_of = |r: usize| self.pixels[r].iter().filter_map(|&i| cloud.point(i as usize));
             let mut pts: Vec<[f32; 3]> = points_of(a).collect();
             let na = pts.len();
             pts.extend(points_of(b));
@@ -357,7 +342,7 @@ impl Segmentation {
             joins += 1;
         }
         if joins > 0 {
-            self.bridge(&joined_into, fits, depth, &rays, dist);
+            self.bridge(&joined_into, fits, cloud, dist);
         }
         joins
     }
@@ -366,7 +351,7 @@ impl Segmentation {
     /// of one region marked in `regions`, where every pixel of the gap is a dropout or lies
     /// on the region's plane: the pieces a join united become one connected region (an
     /// outline is traced around one connected region).
-    fn bridge(&mut self, regions: &[bool], fits: &[Option<PlaneFit>], depth: &Grid<f32>, rays: &Rays, dist: f32) {
+    fn bridge(&mut self, regions: &[bool], fits: &[Option<PlaneFit>], cloud: &Cloud, dist: f32) {
         let (w, h) = (self.labels.width, self.labels.height);
         let mut fills: Vec<(u32, u32)> = Vec::new();
         // Rows (pixels 1 apart, rows w apart), then columns (pixels w apart, columns 1 apart).
@@ -387,7 +372,7 @@ impl Segmentation {
                         && let Some(fit) = &fits[l as usize - 1]
                     {
                         let gap = (t0 + 1..t).map(at);
-                        let on_plane = |i: usize| rays.point(i, depth).is_none_or(|p| fit.distance(&p) < dist as f64);
+                        let on_plane = |i: usize| cloud.point(i).is_none_or(|p| fit.distance(&p) < dist as f64);
                         if gap.clone().all(on_plane) {
                             fills.extend(gap.map(|i| (i as u32, l)));
                         }
@@ -468,35 +453,6 @@ pub fn bounding_box(pixels: &[u32], w: usize) -> [usize; 4] {
         let (u, v) = (i as usize % w, i as usize / w);
         [u0.min(u), v0.min(v), u1.max(u), v1.max(v)]
     })
-}
-
-/// The camera ray's x per column and y per row of an image (z = 1), so that a pixel's
-/// point costs two products instead of two f64 divisions and a 64-bit modulo.
-struct Rays {
-    x: Vec<f32>,
-    y: Vec<f32>,
-    width: u32,
-}
-
-impl Rays {
-    fn new(depth: &Grid<f32>, intr: &Intrinsics) -> Rays {
-        Rays {
-            x: (0..depth.width).map(|u| ((u as f64 - intr.cx) / intr.fx) as f32).collect(),
-            y: (0..depth.height).map(|v| ((v as f64 - intr.cy) / intr.fy) as f32).collect(),
-            width: depth.width as u32,
-        }
-    }
-
-    /// Raw camera-frame point of pixel i, None where the depth is invalid.
-    #[inline]
-    fn point(&self, i: usize, depth: &Grid<f32>) -> Option<[f32; 3]> {
-        let z = depth.data[i];
-        if z == 0.0 {
-            return None;
-        }
-        let (u, v) = ((i as u32 % self.width) as usize, (i as u32 / self.width) as usize);
-        Some([self.x[u] * z, self.y[v] * z, z])
-    }
 }
 
 impl PlaneFit {

@@ -148,29 +148,54 @@ pub fn hypothesis(batch: &PointBatch, r: usize, h: u32) -> Option<([f32; 3], f32
 }
 
 /// Least-squares plane through the points within `dist` of (n, d), then its support.
+/// One pass gathers the inliers' moments, taken about the first inlier so that f64 keeps
+/// the millimetres at metres of range; a second counts the support. Nothing is allocated:
+/// a frame refits every region three or four times.
 pub fn refit(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32) -> Option<PlaneFit> {
-    let near = |p: &[f32; 3], n: [f32; 3], d: f32| (n[0] * p[0] + n[1] * p[1] + n[2] * p[2] + d).abs() < dist;
-    let inl: Vec<Vector3<f64>> =
-        points.iter().filter(|p| near(p, n, d)).map(|p| Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64)).collect();
-    if inl.len() < 3 {
+    let near = |p: &[f32; 3]| (n[0] * p[0] + n[1] * p[1] + n[2] * p[2] + d).abs() < dist;
+    let mut inliers = points.iter().filter(|p| near(p));
+    let first = inliers.next()?;
+    let o = [first[0] as f64, first[1] as f64, first[2] as f64];
+    // Sums of q and of the six distinct products of q's coordinates (q = p - first).
+    let (mut count, mut s, mut ss) = (1usize, [0.0f64; 3], [0.0f64; 6]);
+    for p in inliers {
+        let q = [p[0] as f64 - o[0], p[1] as f64 - o[1], p[2] as f64 - o[2]];
+        count += 1;
+        s = [s[0] + q[0], s[1] + q[1], s[2] + q[2]];
+        ss = [
+            ss[0] + q[0] * q[0],
+            ss[1] + q[0] * q[1],
+            ss[2] + q[0] * q[2],
+            ss[3] + q[1] * q[1],
+            ss[4] + q[1] * q[2],
+            ss[5] + q[2] * q[2],
+        ];
+    }
+    if count < 3 {
         return None;
     }
-    let c = inl.iter().sum::<Vector3<f64>>() / inl.len() as f64;
-    let cov = inl.iter().fold(Matrix3::zeros(), |m, p| m + (p - c) * (p - c).transpose());
+    let (sum, origin) = (Vector3::from(s), Vector3::from(o));
+    let mean = sum / count as f64;
+    let products = Matrix3::new(ss[0], ss[1], ss[2], ss[1], ss[3], ss[4], ss[2], ss[4], ss[5]);
+    let cov = products - mean * sum.transpose();
     let eig = SymmetricEigen::new(cov);
     let mut normal: Vector3<f64> = eig.eigenvectors.column(eig.eigenvalues.imin()).into();
+    let c = origin + mean;
     // Face the camera (at the origin).
     if normal.dot(&c) > 0.0 {
         normal = -normal;
     }
     let offset = -normal.dot(&c);
-    let dists: Vec<f64> = points
-        .iter()
-        .map(|p| (normal.dot(&Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64)) + offset).abs())
-        .filter(|&e| e < dist as f64)
-        .collect();
-    let rms = (dists.iter().map(|e| e * e).sum::<f64>() / dists.len().max(1) as f64).sqrt();
-    Some(PlaneFit { normal, offset, inliers: dists.len(), points: points.len(), rms })
+    let (mut support, mut square_sum) = (0usize, 0.0f64);
+    for p in points {
+        let e = (normal.dot(&Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64)) + offset).abs();
+        if e < dist as f64 {
+            support += 1;
+            square_sum += e * e;
+        }
+    }
+    let rms = (square_sum / support.max(1) as f64).sqrt();
+    Some(PlaneFit { normal, offset, inliers: support, points: points.len(), rms })
 }
 
 /// RANSAC then refit for every region: the whole CPU stage.

@@ -1,0 +1,45 @@
+//! A frame's raw camera-frame points, one per pixel, computed once: the region steps
+//! (fits, leak splits, joins, growth, polygons) each read points of many pixels, and a
+//! lookup is cheaper than back-projecting a pixel index (a division) every time.
+
+use rayon::prelude::*;
+
+use super::Grid;
+use crate::types::Intrinsics;
+
+pub struct Cloud {
+    pub width: usize,
+    /// Pixel i's point (x, y, z) in metres, z = 0 where the depth is invalid.
+    points: Vec<[f32; 3]>,
+}
+
+impl Cloud {
+    /// Back-projects every pixel of a depth image in metres (0 = invalid).
+    pub fn new(depth: &Grid<f32>, intr: &Intrinsics) -> Cloud {
+        let w = depth.width;
+        let ray_x: Vec<f32> = (0..w).map(|u| ((u as f64 - intr.cx) / intr.fx) as f32).collect();
+        let mut points = vec![[0.0f32; 3]; depth.data.len()];
+        if w > 0 {
+            points.par_chunks_mut(w).zip(depth.data.par_chunks(w)).enumerate().for_each(|(v, (row, z))| {
+                let ray_y = ((v as f64 - intr.cy) / intr.fy) as f32;
+                for ((p, &z), &x) in row.iter_mut().zip(z).zip(&ray_x) {
+                    *p = [x * z, ray_y * z, z];
+                }
+            });
+        }
+        Cloud { width: w, points }
+    }
+
+    /// Pixel i's point, None where its depth is invalid.
+    #[inline]
+    pub fn point(&self, i: usize) -> Option<[f32; 3]> {
+        let p = self.points[i];
+        (p[2] != 0.0).then_some(p)
+    }
+
+    /// Pixel i's depth, m (0 = invalid).
+    #[inline]
+    pub fn depth(&self, i: usize) -> f32 {
+        self.points[i][2]
+    }
+}
