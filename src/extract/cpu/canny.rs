@@ -35,10 +35,10 @@ pub fn normal_gradient(normals: &Grid<[f32; 3]>) -> Grid<(f32, u8)> {
             },
         );
         data.par_chunks_mut(w).enumerate().with_min_len(ROWS_PER_TASK).for_each_init(
-            || vec![0.0f32; 7 * w],
-            |scratch, (v, out)| {
+            || (vec![0.0f32; 8 * w], vec![0u8; w]),
+            |(scratch, sectors), (v, out)| {
                 if v >= 1 && v + 1 < h {
-                    gradient_row(&planes[(v - 1) * 4 * w..(v + 2) * 4 * w], &mut out[1..w - 1], w, scratch);
+                    gradient_row(&planes[(v - 1) * 4 * w..(v + 2) * 4 * w], &mut out[1..w - 1], w, scratch, sectors);
                 }
             },
         );
@@ -48,21 +48,22 @@ pub fn normal_gradient(normals: &Grid<[f32; 3]>) -> Grid<(f32, u8)> {
 
 widest_simd! {
     /// One row of `normal_gradient`: `planes` holds the planes of the rows above, at and
-    /// below it; `out` is the row's interior (columns 1 ..= w - 2); `scratch` 7w floats.
-    fn gradient_row(planes: &[f32], out: &mut [(f32, u8)], w: usize, scratch: &mut [f32]) = gradient_row_portable
+    /// below it; `out` is the row's interior (columns 1 ..= w - 2); scratch of 8w floats and w bytes.
+    fn gradient_row(planes: &[f32], out: &mut [(f32, u8)], w: usize, scratch: &mut [f32], sectors: &mut [u8]) = gradient_row_portable
 }
 
 /// Loops over equal-length slices only, so that they carry no bounds checks and vectorise.
 #[inline(always)]
-fn gradient_row_portable(planes: &[f32], out: &mut [(f32, u8)], w: usize, scratch: &mut [f32]) {
+fn gradient_row_portable(planes: &[f32], out: &mut [(f32, u8)], w: usize, scratch: &mut [f32], sectors: &mut [u8]) {
     let n = out.len();
     // Taps left, centre and right of plane c of row j (0 above, 1 at, 2 below).
     let taps = |j: usize, c: usize| {
         let p = &planes[(4 * j + c) * w..][..n + 2];
         (&p[..n], &p[1..n + 1], &p[2..n + 2])
     };
-    let (sums, ok) = scratch.split_at_mut(6 * n);
-    let ok = &mut ok[..n];
+    let (sums, rest) = scratch.split_at_mut(6 * n);
+    let (ok, magnitudes) = rest.split_at_mut(n);
+    let (magnitudes, sectors) = (&mut magnitudes[..n], &mut sectors[..n]);
     for (c, g) in sums.chunks_exact_mut(2 * n).enumerate() {
         let (gx, gy) = g.split_at_mut(n);
         let ((l0, m0, r0), (l1, _, r1), (l2, m2, r2)) = (taps(0, c), taps(1, c), taps(2, c));
@@ -82,9 +83,15 @@ fn gradient_row_portable(planes: &[f32], out: &mut [(f32, u8)], w: usize, scratc
     let (g0, rest) = sums.split_at(2 * n);
     let (g1, g2) = rest.split_at(2 * n);
     let ((gx0, gy0), (gx1, gy1), (gx2, gy2)) = (g0.split_at(n), g1.split_at(n), g2.split_at(n));
+    // Into plain arrays first: a loop storing (f32, u8) pairs does not vectorise.
     for i in 0..n {
         let (m, sector) = gradient_sector([gx0[i], gx1[i], gx2[i]], [gy0[i], gy1[i], gy2[i]]);
-        out[i] = if ok[i] == 1.0 { (m, sector) } else { (0.0, 4) };
+        let valid = ok[i] == 1.0;
+        magnitudes[i] = if valid { m } else { 0.0 };
+        sectors[i] = if valid { sector } else { 4 };
+    }
+    for ((o, &m), &sector) in out.iter_mut().zip(magnitudes.iter()).zip(sectors.iter()) {
+        *o = (m, sector);
     }
 }
 
@@ -129,16 +136,10 @@ pub fn gradient_sector(gx: [f32; 3], gy: [f32; 3]) -> (f32, u8) {
     // Di Zenzo: the direction of largest change is at angle theta with
     // tan(2 theta) = 2 xy / (xx - yy); sectors of theta by comparing a and b.
     let (a, b) = (xx - yy, 2.0 * xy);
-    let sector = if a >= b.abs() {
-        0
-    } else if b >= a.abs() {
-        1
-    } else if -a >= b.abs() {
-        2
-    } else {
-        3
-    };
-    (magnitude, sector)
+    // The first of: a >= |b| (0), b >= |a| (1), -a >= |b| (2), else 3; by arithmetic on
+    // the comparisons, not branches, so the row loop vectorises.
+    let (not0, not1, not2) = (u8::from(!(a >= b.abs())), u8::from(!(b >= a.abs())), u8::from(!(-a >= b.abs())));
+    (magnitude, not0 * (1 + not1 * (1 + not2)))
 }
 
 /// Offsets of the two neighbours compared in non-maximum suppression, by sector.
