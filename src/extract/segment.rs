@@ -186,7 +186,6 @@ impl Segmentation {
             }
             for &(i, l) in &joins {
                 self.labels.data[i as usize] = l;
-                self.pixels[l as usize - 1].push(i);
             }
             candidates.clear();
             for &(i, _) in &joins {
@@ -199,8 +198,18 @@ impl Segmentation {
             candidates.iter().for_each(|&j| queued[j as usize] = false);
             candidates.sort_unstable();
         }
-        // Each wave appended a sorted run: the stable sort merges runs in linear time.
-        self.pixels.iter_mut().for_each(|p| p.sort());
+        self.pixels_from_labels();
+    }
+
+    /// Rebuilds every region's pixel list from the labels: one scan, ascending by
+    /// construction (cheaper than appending each wave of growth and sorting).
+    fn pixels_from_labels(&mut self) {
+        self.pixels.iter_mut().for_each(Vec::clear);
+        for (i, &l) in self.labels.data.iter().enumerate() {
+            if l != 0 {
+                self.pixels[l as usize - 1].push(i as u32);
+            }
+        }
     }
 }
 
