@@ -4,9 +4,10 @@
 // suppresses non-maxima and applies the double threshold (0 none, 1 weak, 2 strong).
 // Hysteresis, a flood along connected pixels, runs on the CPU.
 
-struct Params { width: u32, height: u32, low: f32, high: f32 }
+// Field by field the Rust struct gpu::CannyParams.
+struct CannyParams { width: u32, height: u32, low: f32, high: f32 }
 
-@group(0) @binding(0) var<uniform> p: Params;
+@group(0) @binding(0) var<uniform> p: CannyParams;
 @group(0) @binding(1) var<storage, read> normals: array<f32>;
 @group(0) @binding(2) var<storage, read_write> magnitude: array<f32>;
 @group(0) @binding(3) var<storage, read_write> sector: array<u32>;

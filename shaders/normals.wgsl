@@ -3,12 +3,13 @@
 // cross product of the back-projected surface's tangents, facing the camera. A pixel
 // with any invalid tap, or within the kernel radius of the border, gets (0, 0, 0).
 
-struct Params {
+// Field by field the Rust struct gpu::NormalsParams.
+struct NormalsParams {
     width: u32, height: u32, radius: u32, norm: f32,
     fx: f32, fy: f32, cx: f32, cy: f32,
 }
 
-@group(0) @binding(0) var<uniform> p: Params;
+@group(0) @binding(0) var<uniform> p: NormalsParams;
 @group(0) @binding(1) var<storage, read> depth: array<f32>;
 // smooth[0..7] then deriv[0..7]; only the first 2 * radius + 1 of each are used.
 @group(0) @binding(2) var<storage, read> weights: array<f32, 14>;

@@ -4,9 +4,10 @@
 // with the shared hash, then the 64 invocations count the inliers among the region's
 // evenly strided scoring points together.
 
-struct Params { hypotheses: u32, regions: u32, inlier_distance: f32, max_score_points: u32 }
+// Field by field the Rust struct gpu::RansacParams.
+struct RansacParams { hypotheses: u32, regions: u32, inlier_distance: f32, max_score_points: u32 }
 
-@group(0) @binding(0) var<uniform> p: Params;
+@group(0) @binding(0) var<uniform> p: RansacParams;
 @group(0) @binding(1) var<storage, read> points: array<f32>;
 // (first point, point count) of each region.
 @group(0) @binding(2) var<storage, read> ranges: array<vec2<u32>>;

@@ -49,6 +49,43 @@ pub struct DiffusionParams {
     pub inv_kappa: f32,
 }
 
+/// The uniform of shaders/normals.wgsl, field by field its `NormalsParams`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct NormalsParams {
+    pub width: u32,
+    pub height: u32,
+    /// Half the Sobel kernel's side.
+    pub radius: u32,
+    /// The kernel's derivative normalisation (`sobel_kernel`'s third value).
+    pub norm: f32,
+    pub fx: f32,
+    pub fy: f32,
+    pub cx: f32,
+    pub cy: f32,
+}
+
+/// The uniform of shaders/canny.wgsl (both entry points), field by field its `CannyParams`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct CannyParams {
+    pub width: u32,
+    pub height: u32,
+    /// The double threshold on the gradient's magnitude.
+    pub low: f32,
+    pub high: f32,
+}
+
+/// The uniform of shaders/ransac.wgsl, field by field its `RansacParams`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct RansacParams {
+    pub hypotheses: u32,
+    pub regions: u32,
+    pub inlier_distance: f32,
+    pub max_score_points: u32,
+}
+
 /// A compute pipeline and the layout of its group 0.
 struct Stage {
     pipeline: wgpu::ComputePipeline,
@@ -291,27 +328,21 @@ impl Gpu {
             contents: bytemuck::cast_slice(&weights),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        let f = |x: f64| (x as f32).to_le_bytes();
-        let params = self.uniform(bytemuck::cast_slice(&[
-            w.to_le_bytes(),
-            h.to_le_bytes(),
-            (kernel / 2).to_le_bytes(),
-            norm.to_le_bytes(),
-            f(intr.fx),
-            f(intr.fy),
-            f(intr.cx),
-            f(intr.cy),
-        ]));
+        let params = self.uniform(bytemuck::bytes_of(&NormalsParams {
+            width: w,
+            height: h,
+            radius: kernel / 2,
+            norm,
+            fx: intr.fx as f32,
+            fy: intr.fy as f32,
+            cx: intr.cx as f32,
+            cy: intr.cy as f32,
+        }));
         let group = self.bind(&self.normals, &[(0, &params), (1, smoothed_buf), (2, &weights), (3, &b.normals)]);
         self.run(&self.normals, &[(&group, groups)])?;
         let normals_ms = lap();
 
-        let params = self.uniform(bytemuck::cast_slice(&[
-            w.to_le_bytes(),
-            h.to_le_bytes(),
-            low.to_le_bytes(),
-            high.to_le_bytes(),
-        ]));
+        let params = self.uniform(bytemuck::bytes_of(&CannyParams { width: w, height: h, low, high }));
         let group = self.bind(&self.gradient, &[(0, &params), (1, &b.normals), (2, &b.magnitude), (3, &b.sector)]);
         self.run(&self.gradient, &[(&group, groups)])?;
         let group = self.bind(&self.classify, &[(0, &params), (2, &b.magnitude), (3, &b.sector), (4, &b.class)]);
@@ -360,15 +391,93 @@ impl Gpu {
         let ranges: Vec<[u32; 2]> = batch.ranges.iter().map(|r| [r.start as u32, (r.end - r.start) as u32]).collect();
         let ranges = init("ranges", bytemuck::cast_slice(&ranges));
         let scores = self.storage("scores", total as u64 * 4);
-        let params = self.uniform(bytemuck::cast_slice(&[
-            hypotheses.to_le_bytes(),
-            regions.to_le_bytes(),
-            inlier_distance.to_le_bytes(),
-            (MAX_SCORE_POINTS as u32).to_le_bytes(),
-        ]));
+        let params = self.uniform(bytemuck::bytes_of(&RansacParams {
+            hypotheses,
+            regions,
+            inlier_distance,
+            max_score_points: MAX_SCORE_POINTS as u32,
+        }));
         let group = self.bind(&self.ransac, &[(0, &params), (1, &points), (2, &ranges), (3, &scores)]);
         // At most 65535 workgroups per dimension: wrap into y.
         self.run(&self.ransac, &[(&group, [total.min(65535), total.div_ceil(65535)])])?;
         Ok(bytemuck::cast_slice(&self.read(&scores, total as u64 * 4)?).to_vec())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// (name, offset, type) of each field of a #[repr(C)] struct, in declaration order; the
+    /// types are checked against the struct's by the compiler.
+    macro_rules! fields {
+        ($t:ty { $($f:ident: $ty:ident),* }) => {{
+            $(let _: fn(&$t) -> $ty = |s| s.$f;)*
+            vec![$((stringify!($f), std::mem::offset_of!($t, $f), stringify!($ty))),*]
+        }};
+    }
+
+    /// The WGSL struct `name` has exactly these fields, in this order, at these offsets, and `size` bytes.
+    fn assert_declared_as(source: &str, name: &str, fields: Vec<(&str, usize, &str)>, size: usize) {
+        let module = naga::front::wgsl::parse_str(source).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let (_, ty) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).expect(name);
+        let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("{name} is not a struct") };
+        let declared: Vec<(&str, usize, &str)> = members
+            .iter()
+            .map(|m| {
+                let scalar = match module.types[m.ty].inner {
+                    naga::TypeInner::Scalar(naga::Scalar { kind: naga::ScalarKind::Uint, width: 4 }) => "u32",
+                    naga::TypeInner::Scalar(naga::Scalar { kind: naga::ScalarKind::Float, width: 4 }) => "f32",
+                    ref other => panic!("{name}: a member of type {other:?}"),
+                };
+                (m.name.as_deref().unwrap_or(""), m.offset as usize, scalar)
+            })
+            .collect();
+        assert_eq!(declared, fields, "{name}: the shader's fields against the Rust type's");
+        assert_eq!(*span as usize, size, "{name}: size");
+    }
+
+    #[test]
+    fn every_stage_s_uniform_is_the_struct_its_shader_declares() {
+        assert_declared_as(
+            include_str!("../../shaders/diffusion.wgsl"),
+            "DiffusionParams",
+            fields!(DiffusionParams {
+                len: u32,
+                lines: u32,
+                line_stride: u32,
+                elem_stride: u32,
+                step: f32,
+                inv_kappa: f32
+            }),
+            size_of::<DiffusionParams>(),
+        );
+        assert_declared_as(
+            include_str!("../../shaders/normals.wgsl"),
+            "NormalsParams",
+            fields!(NormalsParams {
+                width: u32,
+                height: u32,
+                radius: u32,
+                norm: f32,
+                fx: f32,
+                fy: f32,
+                cx: f32,
+                cy: f32
+            }),
+            size_of::<NormalsParams>(),
+        );
+        assert_declared_as(
+            include_str!("../../shaders/canny.wgsl"),
+            "CannyParams",
+            fields!(CannyParams { width: u32, height: u32, low: f32, high: f32 }),
+            size_of::<CannyParams>(),
+        );
+        assert_declared_as(
+            include_str!("../../shaders/ransac.wgsl"),
+            "RansacParams",
+            fields!(RansacParams { hypotheses: u32, regions: u32, inlier_distance: f32, max_score_points: u32 }),
+            size_of::<RansacParams>(),
+        );
     }
 }
