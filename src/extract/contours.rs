@@ -22,18 +22,19 @@ pub struct Region {
     pub pixels: usize,
 }
 
-/// The outline and holes of every region of `seg`, simplified by Douglas-Peucker with
+/// The outline and holes of every region r of `seg` with `wanted[r]` (the others are left
+/// without: no polygon is made of them), simplified by Douglas-Peucker with
 /// `simplify_px`, then moved half a pixel outwards (holes shrink) so that the polygon
 /// covers its pixels' squares rather than joining their centres.
-pub fn trace(seg: &Segmentation, simplify_px: f64) -> Vec<Region> {
+pub fn trace(seg: &Segmentation, simplify_px: f64, wanted: &[bool]) -> Vec<Region> {
     let w = seg.labels.width;
     seg.pixels
         .par_iter()
         .enumerate()
         .map(|(r, pixels)| {
             let label = r as u32 + 1;
-            if pixels.is_empty() {
-                return Region { label, outer: Vec::new(), holes: Vec::new(), pixels: 0 };
+            if pixels.is_empty() || !wanted[r] {
+                return Region { label, outer: Vec::new(), holes: Vec::new(), pixels: pixels.len() };
             }
             // The region's bounding box with a one-pixel margin, so its border is traced whole.
             let [u0, v0, u1, v1] = bounding_box(pixels, w);
