@@ -130,6 +130,10 @@ fn four_semi_implicit_steps_smooth_as_the_reference_s_sixty_explicit_ones() {
 fn diffusion_of_nothing_is_nothing() {
     let out = diffusion::diffuse(&Grid { width: 16, height: 12, data: vec![0.0; 192] }, 12.0, 4, 0.0335);
     assert!(out.data.iter().all(|&z| z == 0.0));
+    // And an image of no pixels is no image, not a panic.
+    for (width, height) in [(0, 0), (7, 0), (0, 7)] {
+        assert!(diffusion::diffuse(&Grid { width, height, data: Vec::new() }, 12.0, 4, 0.0335).data.is_empty());
+    }
 }
 
 #[test]

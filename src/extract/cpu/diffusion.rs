@@ -9,7 +9,7 @@
 //! an implicit solve along every row, then one along every column, with the conductances
 //! taken from the pass's input. Each solve is a tridiagonal system (the Thomas
 //! algorithm), stable at any step length, so 4 steps cover the reference's time of 12 at
-//! a fifth of the cost. Weickert, ter Haar Romeny & Viergever ("Efficient and reliable
+//! a quarter of the cost. Weickert, ter Haar Romeny & Viergever ("Efficient and reliable
 //! schemes for nonlinear diffusion filtering", IEEE TIP 7(3), 1998) give the scheme;
 //! README has its accuracy against the explicit one, frame by frame.
 //!
@@ -51,7 +51,7 @@ pub fn coupling(z: f32, q: f32, step: f32, inv_kappa: f32) -> f32 {
 /// steps of 0.2 are 12) in `steps` semi-implicit steps. No steps or no time: unchanged.
 pub fn diffuse(depth: &Grid<f32>, time: f32, steps: u32, kappa: f32) -> Grid<f32> {
     let mut u = depth.clone();
-    if steps == 0 || time <= 0.0 {
+    if steps == 0 || time <= 0.0 || u.data.is_empty() {
         return u;
     }
     let step = time / steps as f32;
@@ -67,13 +67,10 @@ pub fn diffuse(depth: &Grid<f32>, time: f32, steps: u32, kappa: f32) -> Grid<f32
 /// times over, few enough that a 320-wide image still splits into tasks for threads.
 const LANES: usize = 64;
 
-/// The row pass, in place. Rows are solved LANES at a time: each band is transposed so
-/// its rows run down a block and its pixels of one column lie side by side.
+/// The row pass, in place (on a non-empty image). Rows are solved LANES at a time: each
+/// band is transposed so its rows run down a block and its pixels of one column lie side by side.
 fn solve_rows(u: &mut Grid<f32>, step: f32, inv_kappa: f32) {
     let w = u.width;
-    if w == 0 {
-        return;
-    }
     u.data.par_chunks_mut(w * LANES).for_each(|band| {
         let lanes = band.len() / w;
         let mut block = vec![0.0f32; w * lanes];
@@ -92,7 +89,7 @@ fn solve_rows(u: &mut Grid<f32>, step: f32, inv_kappa: f32) {
     });
 }
 
-/// The column pass, in place: stripes of LANES columns, read where they lie.
+/// The column pass, in place (on a non-empty image): stripes of LANES columns, read where they lie.
 fn solve_columns(u: &mut Grid<f32>, step: f32, inv_kappa: f32) {
     let (w, h) = (u.width, u.height);
     let src = &u.data;
@@ -107,7 +104,7 @@ fn solve_columns(u: &mut Grid<f32>, step: f32, inv_kappa: f32) {
         })
         .collect();
     for (x0, out) in stripes {
-        let lanes = out.len() / h.max(1);
+        let lanes = out.len() / h;
         for (y, line) in out.chunks_exact(lanes).enumerate() {
             u.data[y * w + x0..y * w + x0 + lanes].copy_from_slice(line);
         }
