@@ -104,6 +104,40 @@ fn whole_frames_give_the_same_polygons_on_both_twins() {
 }
 
 #[test]
+fn normals_and_edge_classes_alone_agree_with_the_cpu_twin_on_the_same_input() {
+    // No diffusion steps: the GPU's normals and classes are computed from exactly the
+    // depth the CPU's are, the CPU twin's smoothed depth, so each stage is compared alone.
+    let Some(gpu) = gpu() else { return };
+    let mut gpu = gpu.lock().unwrap();
+    let cfg = PipelineConfig::default();
+    let stages_only = PipelineConfig { diffusion_steps: 0, ..cfg.clone() };
+    let (mut worst_normal, mut worst_share) = (0.0f32, 0.0f64);
+    for (name, seq, k) in mock_frames(5) {
+        let depth = depth_metres(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
+        let smoothed =
+            diffusion::diffuse(&depth, cfg.diffusion_time as f32, cfg.diffusion_steps, cfg.diffusion_kappa_m as f32);
+        let g = gpu.image_stages(&smoothed, &seq.intrinsics, &stages_only).unwrap();
+        assert_eq!(g.smoothed.data, smoothed.data, "{name} frame {k}: no steps, no change");
+
+        let n = normals::normals(&smoothed, &seq.intrinsics, cfg.normal_kernel);
+        let flat = |g: &Grid<[f32; 3]>| g.data.iter().flatten().copied().collect::<Vec<f32>>();
+        let d = max_abs_diff(&flat(&g.normals), &flat(&n));
+        assert!(d <= 1e-5, "{name} frame {k}: normals differ by {d}");
+        worst_normal = worst_normal.max(d);
+
+        // The double-threshold classes before hysteresis, from each twin's normals (equal
+        // to 1e-5: only a magnitude within rounding of a threshold or a tie may flip).
+        let class = canny::classify(&canny::normal_gradient(&n), cfg.canny_low as f32, cfg.canny_high as f32);
+        let differ = class.data.iter().zip(&g.class.data).filter(|(a, b)| a != b).count();
+        let share = differ as f64 / class.data.len() as f64;
+        assert!(share < 0.001, "{name} frame {k}: classes differ in {:.3} % of pixels", share * 100.0);
+        assert!(class.data.contains(&2), "{name} frame {k}: the stairs have strong edges");
+        worst_share = worst_share.max(share);
+    }
+    eprintln!("worst normal difference {worst_normal:e}, classes differing {:.4} %", worst_share * 100.0);
+}
+
+#[test]
 fn batched_scores_match_the_cpu_scores_exactly_on_planted_planes() {
     let Some(gpu) = gpu() else { return };
     let gpu = gpu.lock().unwrap();
