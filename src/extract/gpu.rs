@@ -65,7 +65,7 @@ pub struct NormalsParams {
     pub cy: f32,
 }
 
-/// The uniform of shaders/canny.wgsl (both entry points), field by field its `CannyParams`.
+/// The uniform of shaders/gradient.wgsl and shaders/classify.wgsl, field by field their `CannyParams`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct CannyParams {
@@ -162,14 +162,13 @@ impl Gpu {
             let layout = pipeline.get_bind_group_layout(0);
             Stage { pipeline, layout }
         };
-        let canny = include_str!("../../shaders/canny.wgsl");
         // A shader the driver rejects is an error to report, not wgpu's default panic.
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let (diffusion, normals, gradient, classify, ransac) = (
             stage(include_str!("../../shaders/diffusion.wgsl"), "main"),
             stage(include_str!("../../shaders/normals.wgsl"), "main"),
-            stage(canny, "gradient"),
-            stage(canny, "classify"),
+            stage(include_str!("../../shaders/gradient.wgsl"), "main"),
+            stage(include_str!("../../shaders/classify.wgsl"), "main"),
             stage(include_str!("../../shaders/ransac.wgsl"), "main"),
         );
         if let Some(e) = pollster::block_on(scope.pop()) {
@@ -467,12 +466,14 @@ mod tests {
             }),
             size_of::<NormalsParams>(),
         );
-        assert_declared_as(
-            include_str!("../../shaders/canny.wgsl"),
-            "CannyParams",
-            fields!(CannyParams { width: u32, height: u32, low: f32, high: f32 }),
-            size_of::<CannyParams>(),
-        );
+        for source in [include_str!("../../shaders/gradient.wgsl"), include_str!("../../shaders/classify.wgsl")] {
+            assert_declared_as(
+                source,
+                "CannyParams",
+                fields!(CannyParams { width: u32, height: u32, low: f32, high: f32 }),
+                size_of::<CannyParams>(),
+            );
+        }
         assert_declared_as(
             include_str!("../../shaders/ransac.wgsl"),
             "RansacParams",

@@ -1,4 +1,4 @@
-//! Edges of the normal image: the CPU twin of the GPU stage shaders/canny.wgsl (the WGSL half lands with the GPU backend).
+//! Edges of the normal image: the CPU twin of shaders/gradient.wgsl and shaders/classify.wgsl.
 //!
 //! Canny on a vector image: the gradient of the unit-normal field (3x3 Sobel per
 //! channel, in change of normal per pixel), its magnitude and Di Zenzo direction,
@@ -16,7 +16,7 @@ use crate::grid::{Grid, label_components};
 /// a pixel whose 3x3 neighbourhood lacks a normal, or on the image's border (magnitude 0
 /// there). The fast loop: the normals are split into planes of x, y, z and validity once,
 /// then each row is one pass of plain slice arithmetic over the three rows around it, so
-/// it vectorises. Sums in the order of `gradient_at` (and of shaders/canny.wgsl): the
+/// it vectorises. Sums in the order of `gradient_at` (and of shaders/gradient.wgsl): the
 /// results are the same bits.
 pub fn normal_gradient(normals: &Grid<[f32; 3]>) -> Grid<(f32, u8)> {
     let (w, h) = (normals.width, normals.height);
@@ -95,7 +95,7 @@ fn gradient_row_portable(planes: &[f32], out: &mut [(f32, u8)], w: usize, scratc
     }
 }
 
-/// The oracle of `normal_gradient`: pixel (u, v) alone, line for line as shaders/canny.wgsl
+/// The oracle of `normal_gradient`: pixel (u, v) alone, line for line as shaders/gradient.wgsl
 /// computes it.
 pub fn gradient_at(normals: &Grid<[f32; 3]>, u: usize, v: usize) -> (f32, u8) {
     let (w, h) = (normals.width, normals.height);

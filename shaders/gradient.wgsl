@@ -1,24 +1,22 @@
-// Canny on the normal image, the per-pixel half: the GPU side of
-// src/extract/cpu/canny.rs (normal_gradient, gradient_sector, suppressed_class).
-// `gradient` writes magnitude and NMS sector (4 = a tap without a normal); `classify`
-// suppresses non-maxima and applies the double threshold (0 none, 1 weak, 2 strong).
-// Hysteresis, a flood along connected pixels, runs on the CPU.
+// Canny on the normal image, first pass: the gradient of the unit-normal field, its
+// magnitude (change of normal per pixel) and non-maximum-suppression sector (4 = a tap
+// without a normal). The GPU side of src/extract/cpu/canny.rs (normal_gradient,
+// gradient_sector); shaders/classify.wgsl reads what it writes.
 
-// Field by field the Rust struct gpu::CannyParams.
+// Field by field the Rust struct gpu::CannyParams (shared with classify.wgsl).
 struct CannyParams { width: u32, height: u32, low: f32, high: f32 }
 
 @group(0) @binding(0) var<uniform> p: CannyParams;
 @group(0) @binding(1) var<storage, read> normals: array<f32>;
 @group(0) @binding(2) var<storage, read_write> magnitude: array<f32>;
 @group(0) @binding(3) var<storage, read_write> sector: array<u32>;
-@group(0) @binding(4) var<storage, read_write> classes: array<u32>;
 
 fn normal_at(i: u32) -> vec3<f32> {
     return vec3<f32>(normals[3u * i], normals[3u * i + 1u], normals[3u * i + 2u]);
 }
 
 @compute @workgroup_size(16, 16)
-fn gradient(@builtin(global_invocation_id) id: vec3<u32>) {
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let u = id.x;
     let v = id.y;
     if (u >= p.width || v >= p.height) { return; }
@@ -50,26 +48,4 @@ fn gradient(@builtin(global_invocation_id) id: vec3<u32>) {
     let a = xx - yy;
     let b = 2.0 * xy;
     if (a >= abs(b)) { sector[i] = 0u; } else if (b >= abs(a)) { sector[i] = 1u; } else if (-a >= abs(b)) { sector[i] = 2u; } else { sector[i] = 3u; }
-}
-
-fn magnitude_at(u: i32, v: i32) -> f32 {
-    if (u < 0 || v < 0 || u >= i32(p.width) || v >= i32(p.height)) { return 0.0; }
-    return magnitude[u32(v) * p.width + u32(u)];
-}
-
-@compute @workgroup_size(16, 16)
-fn classify(@builtin(global_invocation_id) id: vec3<u32>) {
-    if (id.x >= p.width || id.y >= p.height) { return; }
-    let i = id.y * p.width + id.x;
-    let m = magnitude[i];
-    let sec = sector[i];
-    classes[i] = 0u;
-    if (sec == 4u || m < p.low) { return; }
-    let steps = array<vec2<i32>, 4>(vec2<i32>(1, 0), vec2<i32>(1, 1), vec2<i32>(0, 1), vec2<i32>(-1, 1));
-    let st = steps[sec];
-    let u = i32(id.x);
-    let v = i32(id.y);
-    if (m > magnitude_at(u - st.x, v - st.y) && m >= magnitude_at(u + st.x, v + st.y)) {
-        if (m >= p.high) { classes[i] = 2u; } else { classes[i] = 1u; }
-    }
 }
