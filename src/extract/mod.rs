@@ -313,9 +313,9 @@ pub fn segment_and_fit(
     let accepted: Vec<bool> = fits.iter().map(|f| f.is_some_and(|f| f.inlier_ratio() >= min_ratio)).collect();
     seg.grow(&fits, &accepted, cloud, dist, cfg.region_grow_px);
     refit_grown(&seg, &mut fits, &accepted, cloud, dist, min_ratio);
-    // Outlines only for the planes that can become polygons.
-    let wanted: Vec<bool> = fits.iter().map(|f| f.is_some_and(|f| f.inlier_ratio() >= min_ratio)).collect();
-    let regions = contours::trace(&seg, cfg.simplify_tolerance_px, &wanted);
+    // Outlines only for the planes that can become polygons: the refit keeps each accepted
+    // region accepted and touches no other, so `accepted` still says which.
+    let regions = contours::trace(&seg, cfg.simplify_tolerance_px, &accepted);
     times.contours += lap();
     Ok((seg, regions, fits))
 }
