@@ -5,7 +5,7 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use polymap::config::PipelineConfig;
 use polymap::extract::cloud::Cloud;
-use polymap::extract::cpu::{canny, diffusion, normals, ransac};
+use polymap::extract::cpu::{boundary, canny, diffusion, normals, ransac};
 use polymap::extract::{depth_metres, extract_cpu, extract_gpu, gpu::Gpu, segment::Segmentation};
 use polymap::synth::{NoiseModel, Scene, SceneKind, noisy_depth, path::trajectory, render};
 use polymap::types::{DepthFrame, Intrinsics};
@@ -30,11 +30,11 @@ fn bench(c: &mut Criterion) {
         c.bench_function(&format!("cpu edges {size}"), |b| {
             b.iter(|| {
                 let e = canny::canny(&canny::normal_gradient(&n), 0.05, 0.1);
-                canny::boundary(&e, &smoothed, 0.03, &n, cfg.closing_kernel_px, 5)
+                boundary::boundary(&e, &smoothed, 0.03, &n, cfg.closing_kernel_px, 5)
             })
         });
         let e = canny::canny(&canny::normal_gradient(&n), 0.05, 0.1);
-        let boundary = canny::boundary(&e, &smoothed, 0.03, &n, cfg.closing_kernel_px, 5);
+        let boundary = boundary::boundary(&e, &smoothed, 0.03, &n, cfg.closing_kernel_px, 5);
         c.bench_function(&format!("cpu regions {size}"), |b| b.iter(|| Segmentation::components(&boundary, 30)));
         let seg = Segmentation::components(&boundary, 30);
         let all: Vec<usize> = (0..seg.pixels.len()).collect();
@@ -42,7 +42,9 @@ fn bench(c: &mut Criterion) {
         c.bench_function(&format!("cpu ransac {size}"), |b| b.iter(|| ransac::fit_planes(&batch, 20, 0.01)));
         c.bench_function(&format!("cpu frame {size}"), |b| b.iter(|| extract_cpu(&frame, &intr, &cfg).unwrap()));
         if let Some(g) = gpu.as_mut() {
-            c.bench_function(&format!("gpu frame {size}"), |b| b.iter(|| extract_gpu(g, &frame, &intr, &cfg).unwrap()));
+            c.bench_function(&format!("gpu frame {size}"), |b| {
+                b.iter(|| extract_gpu(g, &frame, &intr, &cfg, false).unwrap())
+            });
         }
     }
 }

@@ -52,7 +52,7 @@ for seq in seqs:
     runs = [(1, json.load(open(f"{out}/{name}.1.json"))), (cores, json.load(open(f"{out}/{name}.all.json")))]
     print(f"\n{seq}: {cape['width']}x{cape['height']}, {cape['frames']} frames a run, ms per frame (median / p99)")
     print(f"{'stage':>10} " + " ".join(f"{'polymap ' + str(t) + ' thr':>22}" for t, _ in runs))
-    for stage in ["upload", "diffusion", "normals", "edges", "contours", "ransac", "polygons", "total"]:
+    for stage in ["upload", "diffusion", "normals", "edges", "regions", "contours", "ransac", "polygons", "total"]:
         print(f"{stage:>10} " + " ".join(f"{r['stages_ms'][stage]['median']:>10.3f} / {r['stages_ms'][stage]['p99']:>9.3f}" for _, r in runs))
     print(f"{'CAPE 1 thr':>10} {cape['median_ms']:>10.3f} / {cape['p99_ms']:>9.3f}   ({cape['planes_per_frame']:.1f} planes a frame, {cape['patch']} px cells)")
     for t, r in runs:

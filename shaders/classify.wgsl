@@ -1,15 +1,15 @@
 // Canny on the normal image, second pass: non-maximum suppression along the gradient's
 // sector and the double threshold (0 none, 1 weak, 2 strong), from shaders/gradient.wgsl's
 // magnitude and sector. The GPU side of src/extract/cpu/canny.rs (suppressed_class).
-// Hysteresis, a flood along connected pixels, runs on the CPU.
+// Hysteresis follows in shaders/hysteresis.wgsl.
 
 // Field by field the Rust struct gpu::CannyParams (shared with gradient.wgsl).
 struct CannyParams { width: u32, height: u32, low: f32, high: f32 }
 
 @group(0) @binding(0) var<uniform> p: CannyParams;
-@group(0) @binding(2) var<storage, read> magnitude: array<f32>;
-@group(0) @binding(3) var<storage, read> sector: array<u32>;
-@group(0) @binding(4) var<storage, read_write> classes: array<u32>;
+@group(0) @binding(1) var<storage, read> magnitude: array<f32>;
+@group(0) @binding(2) var<storage, read> sector: array<u32>;
+@group(0) @binding(3) var<storage, read_write> classes: array<u32>;
 
 fn magnitude_at(u: i32, v: i32) -> f32 {
     if (u < 0 || v < 0 || u >= i32(p.width) || v >= i32(p.height)) { return 0.0; }

@@ -35,6 +35,8 @@ pub fn stage_spreads(times: &[StageTimes]) -> Vec<(&'static str, Spread)> {
         ("diffusion", stage(|t| t.diffusion)),
         ("normals", stage(|t| t.normals)),
         ("edges", stage(|t| t.edges)),
+        ("regions", stage(|t| t.regions)),
+        ("readback", stage(|t| t.readback)),
         ("contours", stage(|t| t.contours)),
         ("ransac", stage(|t| t.ransac)),
         ("polygons", stage(|t| t.polygons)),

@@ -250,7 +250,9 @@ fn run(cli: Cli) -> Result<()> {
                 bail!("--frame {frame}: {} has frames 0..{}", seq.display(), s.len());
             }
             let depth = s.depth(frame)?;
-            let (result, stages, times) = extract::Extractor::new(&config.pipeline)?.extract(&depth, &s.intrinsics)?;
+            let mut extractor = extract::Extractor::new(&config.pipeline)?;
+            extractor.keep_images = debug.is_some();
+            let (result, stages, times) = extractor.extract(&depth, &s.intrinsics)?;
             tracing::info!("frame {frame}: {} polygons in {:.1} ms", result.polygons.len(), times.total);
             if let Some(dir) = &debug {
                 extract::debug::write_stage_images(dir, &stages, &result.polygons, &s.intrinsics)?;
@@ -673,7 +675,8 @@ fn bench(s: &Sequence, config: &Config, frames: usize, json: bool) -> Result<()>
     bar.finish_and_clear();
     let stages = polymap::bench::stage_spreads(&times);
     let device = match &extractor.engine {
-        extract::Engine::Gpu(g) => g.describe(),
+        extract::Engine::Gpu(g) if g.has_timestamps() => format!("{}, stages by GPU timestamps", g.describe()),
+        extract::Engine::Gpu(g) => format!("{}, no GPU timestamps: the stages' time is in readback", g.describe()),
         extract::Engine::Cpu => format!("CPU twin, {} threads", rayon::current_num_threads()),
     };
     let (w, h) = (s.intrinsics.width, s.intrinsics.height);

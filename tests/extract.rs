@@ -4,7 +4,7 @@
 use nalgebra::Vector3;
 use polymap::config::PipelineConfig;
 use polymap::extract::cloud::Cloud;
-use polymap::extract::cpu::{canny, diffusion, normals, ransac};
+use polymap::extract::cpu::{boundary, canny, diffusion, normals, ransac};
 use polymap::extract::{ExtractError, Grid, extract_cpu};
 use polymap::synth::{NoiseModel, Scene, SceneKind, noisy_depth, path::trajectory, render};
 use polymap::types::{DepthFrame, Intrinsics};
@@ -201,7 +201,7 @@ fn closing_bridges_gaps_and_keeps_the_border() {
     for u in (0..w).filter(|u| !(12..16).contains(u)) {
         data[10 * w + u] = 1; // a line with a 4-pixel gap
     }
-    let closed = canny::close(&Grid { width: w, height: h, data: data.clone() }, 7);
+    let closed = boundary::close(&Grid { width: w, height: h, data: data.clone() }, 7);
     assert!((0..w).all(|u| closed.data[10 * w + u] == 1), "the gap is bridged");
     assert_eq!(closed.data.iter().filter(|&&e| e != 0).count(), w, "and nothing else is added");
 }
@@ -363,7 +363,7 @@ fn all_invalid_frame_gives_no_polygons_and_a_bad_frame_an_error() {
     let empty = DepthFrame { stamp_ns: 5, width: 64, height: 48, depth_scale: 0.00025, pixels: vec![0; 64 * 48] };
     let (out, stages, _) = extract_cpu(&empty, &i, &PipelineConfig::default()).unwrap();
     assert!(out.polygons.is_empty());
-    assert!(stages.smoothed.data.iter().all(|z| *z == 0.0));
+    assert!(stages.images.expect("the CPU keeps its images").smoothed.data.iter().all(|z| *z == 0.0));
     let short = DepthFrame { pixels: vec![0; 100], ..empty.clone() };
     assert!(matches!(extract_cpu(&short, &i, &PipelineConfig::default()), Err(ExtractError::SizeMismatch { .. })));
     let bad_scale = DepthFrame { depth_scale: f64::NAN, ..empty };

@@ -9,9 +9,11 @@ use std::sync::{Mutex, OnceLock};
 
 use nalgebra::Vector3;
 use polymap::config::PipelineConfig;
-use polymap::extract::cpu::{canny, diffusion, normals, ransac};
+use polymap::extract::cpu::components::{self, components_oracle, dense_from_roots};
+use polymap::extract::cpu::{self, canny, diffusion, normals, ransac};
 use polymap::extract::gpu::Gpu;
-use polymap::extract::{Grid, depth_metres, extract_cpu, extract_gpu};
+use polymap::extract::{Grid, Images, depth_metres, extract_cpu, extract_gpu};
+use polymap::grid::label_components;
 use polymap::sequence::Sequence;
 
 /// One device for the whole test binary: opening one costs more than a frame.
@@ -48,47 +50,61 @@ fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
     a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
 }
 
+/// The GPU's stages of one frame with their images read back.
+fn gpu_images(gpu: &mut Gpu, depth: &Grid<f32>, seq: &Sequence, cfg: &PipelineConfig) -> (Images, Grid<u32>) {
+    let g = gpu.image_stages(depth, &seq.intrinsics, cfg, true).unwrap();
+    (g.images.expect("asked for the images"), g.regions)
+}
+
+/// Share of pixels where two masks differ.
+fn share_differing(a: &Grid<u8>, b: &Grid<u8>) -> f64 {
+    a.data.iter().zip(&b.data).filter(|(x, y)| x != y).count() as f64 / a.data.len() as f64
+}
+
 #[test]
 fn image_stages_agree_with_the_cpu_twin_on_every_mock_sequence() {
     let Some(gpu) = gpu() else { return };
-    let mut gpu = gpu.lock().unwrap();
+    let mut gpu = gpu.lock().unwrap_or_else(|e| e.into_inner());
     let cfg = PipelineConfig::default();
     for (name, seq, k) in mock_frames(5) {
         let depth = depth_metres(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
-        let g = gpu.image_stages(&depth, &seq.intrinsics, &cfg).unwrap();
-        let smoothed =
-            diffusion::diffuse(&depth, cfg.diffusion_time as f32, cfg.diffusion_steps, cfg.diffusion_kappa_m as f32);
-        let d = max_abs_diff(&g.smoothed.data, &smoothed.data);
+        let (g, regions) = gpu_images(&mut gpu, &depth, &seq, &cfg);
+        let c = cpu::image_stages(&depth, &seq.intrinsics, &cfg, &mut Default::default(), &mut || 0.0);
+        let d = max_abs_diff(&g.smoothed.data, &c.smoothed.data);
         // A few ulps of depth (0.5 µm when written): the GPU may fuse multiply-adds.
         assert!(d <= 2e-6, "{name} frame {k}: diffusion differs by {d} m");
         // Zeros (invalid) must agree exactly: holes are never filled by either twin.
-        assert!(g.smoothed.data.iter().zip(&smoothed.data).all(|(a, b)| (*a == 0.0) == (*b == 0.0)));
+        assert!(g.smoothed.data.iter().zip(&c.smoothed.data).all(|(a, b)| (*a == 0.0) == (*b == 0.0)));
 
-        let n = normals::normals(&smoothed, &seq.intrinsics, 5);
         let flat = |g: &Grid<[f32; 3]>| g.data.iter().flatten().copied().collect::<Vec<f32>>();
-        let d = max_abs_diff(&flat(&g.normals), &flat(&n));
+        let d = max_abs_diff(&flat(&g.normals), &flat(&c.normals));
         assert!(d <= 1e-4, "{name} frame {k}: normals differ by {d}");
 
-        // Edges from each twin's own inputs, as the pipelines run them.
-        let cpu_edges = canny::canny(&canny::normal_gradient(&n), 0.05, 0.1);
-        let gpu_edges = canny::hysteresis(&g.class);
-        let differ = cpu_edges.data.iter().zip(&gpu_edges.data).filter(|(a, b)| a != b).count();
-        let share = differ as f64 / cpu_edges.data.len() as f64;
+        // Edges and boundary from each twin's own inputs, as the pipelines run them.
+        let share = share_differing(&c.canny, &g.canny);
         assert!(share < 0.005, "{name} frame {k}: edge maps differ in {:.3} % of pixels", share * 100.0);
-        assert!(cpu_edges.data.iter().any(|&e| e != 0), "{name} frame {k}: the stairs have edges");
+        assert!(c.canny.data.iter().any(|&e| e != 0), "{name} frame {k}: the stairs have edges");
+        let share = share_differing(&c.boundary, &g.boundary);
+        assert!(share < 0.005, "{name} frame {k}: boundaries differ in {:.3} % of pixels", share * 100.0);
+        // The GPU's regions are the components of its own boundary.
+        let mut labels = regions.data;
+        dense_from_roots(&mut labels);
+        let free: Vec<bool> = g.boundary.data.iter().map(|&b| b == 0).collect();
+        assert_eq!(labels, label_components(&free, g.boundary.width, g.boundary.height).0, "{name} frame {k}: regions");
     }
 }
 
 #[test]
 fn whole_frames_give_the_same_polygons_on_both_twins() {
     let Some(gpu) = gpu() else { return };
-    let mut gpu = gpu.lock().unwrap();
+    let mut gpu = gpu.lock().unwrap_or_else(|e| e.into_inner());
     let cfg = PipelineConfig::default();
     let mut compared = 0;
     for (name, seq, k) in mock_frames(5) {
         let frame = seq.depth(k).unwrap();
         let (c, _, _) = extract_cpu(&frame, &seq.intrinsics, &cfg).unwrap();
-        let (g, _, _) = extract_gpu(&mut gpu, &frame, &seq.intrinsics, &cfg).unwrap();
+        let (g, stages, _) = extract_gpu(&mut gpu, &frame, &seq.intrinsics, &cfg, false).unwrap();
+        assert!(stages.images.is_none(), "{name} frame {k}: images read back unasked");
         assert_eq!(c.polygons.len(), g.polygons.len(), "{name} frame {k}: polygon counts");
         for (a, b) in c.polygons.iter().zip(&g.polygons) {
             let angle = Vector3::from(a.normal).angle(&Vector3::from(b.normal)).to_degrees();
@@ -104,11 +120,11 @@ fn whole_frames_give_the_same_polygons_on_both_twins() {
 }
 
 #[test]
-fn normals_and_edge_classes_alone_agree_with_the_cpu_twin_on_the_same_input() {
-    // No diffusion steps: the GPU's normals and classes are computed from exactly the
+fn normals_and_edges_alone_agree_with_the_cpu_twin_on_the_same_input() {
+    // No diffusion steps: the GPU's normals and edges are computed from exactly the
     // depth the CPU's are, the CPU twin's smoothed depth, so each stage is compared alone.
     let Some(gpu) = gpu() else { return };
-    let mut gpu = gpu.lock().unwrap();
+    let mut gpu = gpu.lock().unwrap_or_else(|e| e.into_inner());
     let cfg = PipelineConfig::default();
     let stages_only = PipelineConfig { diffusion_steps: 0, ..cfg.clone() };
     let (mut worst_normal, mut worst_share) = (0.0f32, 0.0f64);
@@ -116,7 +132,7 @@ fn normals_and_edge_classes_alone_agree_with_the_cpu_twin_on_the_same_input() {
         let depth = depth_metres(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
         let smoothed =
             diffusion::diffuse(&depth, cfg.diffusion_time as f32, cfg.diffusion_steps, cfg.diffusion_kappa_m as f32);
-        let g = gpu.image_stages(&smoothed, &seq.intrinsics, &stages_only).unwrap();
+        let (g, _) = gpu_images(&mut gpu, &smoothed, &seq, &stages_only);
         assert_eq!(g.smoothed.data, smoothed.data, "{name} frame {k}: no steps, no change");
 
         let n = normals::normals(&smoothed, &seq.intrinsics, cfg.normal_kernel);
@@ -125,22 +141,65 @@ fn normals_and_edge_classes_alone_agree_with_the_cpu_twin_on_the_same_input() {
         assert!(d <= 1e-5, "{name} frame {k}: normals differ by {d}");
         worst_normal = worst_normal.max(d);
 
-        // The double-threshold classes before hysteresis, from each twin's normals (equal
-        // to 1e-5: only a magnitude within rounding of a threshold or a tie may flip).
+        // Canny's edges, from each twin's normals (equal to 1e-5: only a magnitude within
+        // rounding of a threshold or a tie may flip a pixel, and hysteresis its line).
         let class = canny::classify(&canny::normal_gradient(&n), cfg.canny_low as f32, cfg.canny_high as f32);
-        let differ = class.data.iter().zip(&g.class.data).filter(|(a, b)| a != b).count();
-        let share = differ as f64 / class.data.len() as f64;
-        assert!(share < 0.001, "{name} frame {k}: classes differ in {:.3} % of pixels", share * 100.0);
+        let share = share_differing(&components::hysteresis(&class), &g.canny);
+        assert!(share < 0.001, "{name} frame {k}: edges differ in {:.3} % of pixels", share * 100.0);
         assert!(class.data.contains(&2), "{name} frame {k}: the stairs have strong edges");
         worst_share = worst_share.max(share);
     }
-    eprintln!("worst normal difference {worst_normal:e}, classes differing {:.4} %", worst_share * 100.0);
+    eprintln!("worst normal difference {worst_normal:e}, edges differing {:.4} %", worst_share * 100.0);
+}
+
+/// Per frame of every mock sequence: the CPU twin's classes, edges, smoothed depth and normals.
+fn cpu_inputs(step: usize) -> Vec<(String, usize, Grid<u8>, Images)> {
+    let cfg = PipelineConfig::default();
+    mock_frames(step)
+        .into_iter()
+        .map(|(name, seq, k)| {
+            let depth = depth_metres(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
+            let images = cpu::image_stages(&depth, &seq.intrinsics, &cfg, &mut Default::default(), &mut || 0.0);
+            let grad = canny::normal_gradient(&images.normals);
+            (name, k, canny::classify(&grad, cfg.canny_low as f32, cfg.canny_high as f32), images)
+        })
+        .collect()
+}
+
+#[test]
+fn hysteresis_boundary_and_regions_alone_are_the_cpu_twin_s_bit_for_bit() {
+    // Each stage from the same input on both twins: integer results, so equal exactly.
+    let Some(gpu) = gpu() else { return };
+    let mut gpu = gpu.lock().unwrap_or_else(|e| e.into_inner());
+    let cfg = PipelineConfig::default();
+    let mut regions_seen = 0;
+    for (name, k, class, c) in cpu_inputs(10) {
+        let edges = gpu.hysteresis_alone(&class, &cfg).unwrap();
+        assert_eq!(edges, c.canny, "{name} frame {k}: hysteresis");
+        assert!(
+            class.data.iter().zip(&c.canny.data).any(|(&cl, &e)| cl == 1 && e == 0),
+            "{name} frame {k}: weak pixels dropped"
+        );
+
+        let boundary = gpu.boundary_alone(&c.canny, &c.smoothed, &c.normals, &cfg).unwrap();
+        assert_eq!(boundary, c.boundary, "{name} frame {k}: boundary");
+
+        let roots = gpu.regions_alone(&c.boundary).unwrap();
+        let free = |i: usize| c.boundary.data[i] == 0;
+        assert_eq!(roots.data, components_oracle(roots.width, roots.height, free), "{name} frame {k}: root labels");
+        let mut labels = roots.data;
+        let count = dense_from_roots(&mut labels);
+        let mask: Vec<bool> = (0..labels.len()).map(free).collect();
+        assert_eq!((labels, count), label_components(&mask, roots.width, roots.height), "{name} frame {k}: regions");
+        regions_seen += count;
+    }
+    assert!(regions_seen > 50, "{regions_seen} regions compared");
 }
 
 #[test]
 fn batched_scores_match_the_cpu_scores_exactly_on_planted_planes() {
     let Some(gpu) = gpu() else { return };
-    let gpu = gpu.lock().unwrap();
+    let gpu = gpu.lock().unwrap_or_else(|e| e.into_inner());
     // Several regions of very different sizes (3 points up to past the scoring cap), and an empty one.
     let mut batch = ransac::PointBatch::default();
     let mut state = 7u32;

@@ -9,7 +9,8 @@ use super::{Polygon, Stages};
 use crate::types::Intrinsics;
 use crate::viz;
 
-/// Writes 1_depth, 2_smoothed, 3_normals, 4_edges, 5_regions and 6_polygons PNGs into `dir`.
+/// Writes 1_depth, 2_smoothed, 3_normals, 4_edges, 5_regions and 6_polygons PNGs into
+/// `dir` (2-4 only when the stages kept their images: `Extractor::keep_images` on the GPU).
 pub fn write_stage_images(
     dir: &Path,
     stages: &Stages,
@@ -21,18 +22,20 @@ pub fn write_stage_images(
     let (near, far) = viz::percentile_range(stages.depth.data.iter().filter(|&&d| d > 0.0).map(|&d| d as f64));
     let depth = viz::depth_image(w, h, |i| stages.depth.data[i] as f64, near, far);
     depth.save(dir.join("1_depth.png"))?;
-    viz::depth_image(w, h, |i| stages.smoothed.data[i] as f64, near, far).save(dir.join("2_smoothed.png"))?;
-    viz::normal_image(w, h, &stages.normals.data).save(dir.join("3_normals.png"))?;
-    // Canny edges white, the rest of the closed boundary grey.
-    RgbImage::from_fn(w, h, |u, v| {
-        let i = (v * w + u) as usize;
-        match (stages.canny.data[i], stages.boundary.data[i]) {
-            (1, _) => Rgb([255, 255, 255]),
-            (_, 1) => Rgb([110, 110, 110]),
-            _ => Rgb([0, 0, 0]),
-        }
-    })
-    .save(dir.join("4_edges.png"))?;
+    if let Some(images) = &stages.images {
+        viz::depth_image(w, h, |i| images.smoothed.data[i] as f64, near, far).save(dir.join("2_smoothed.png"))?;
+        viz::normal_image(w, h, &images.normals.data).save(dir.join("3_normals.png"))?;
+        // Canny edges white, the rest of the closed boundary grey.
+        RgbImage::from_fn(w, h, |u, v| {
+            let i = (v * w + u) as usize;
+            match (images.canny.data[i], images.boundary.data[i]) {
+                (1, _) => Rgb([255, 255, 255]),
+                (_, 1) => Rgb([110, 110, 110]),
+                _ => Rgb([0, 0, 0]),
+            }
+        })
+        .save(dir.join("4_edges.png"))?;
+    }
     RgbImage::from_fn(w, h, |u, v| viz::label_colour(stages.labels.data[(v * w + u) as usize]))
         .save(dir.join("5_regions.png"))?;
     polygon_image(&depth, polygons, intr).save(dir.join("6_polygons.png"))

@@ -2,16 +2,17 @@
 //! machine without a GPU, Mesa's lavapipe). Each stage is a WGSL shader in shaders/
 //! mirroring its CPU twin in `cpu/`; the tests hold the two to the same answers.
 //!
-//! One `Gpu` holds the device and the compiled pipelines; image buffers are made for
-//! the first frame of a size and reused. Each stage is submitted on its own and waited
-//! for, so the stage times are real; the readbacks give the intermediate images the
-//! CPU half of the pipeline (hysteresis, closing, regions) works on.
+//! One `Gpu` holds the device and the compiled pipelines. Buffers, uniforms and bind
+//! groups are made for the first frame of a size and reused. A frame's per-pixel
+//! stages, from the depth to the region labels, are one submit and one readback; GPU
+//! timestamps around each stage's compute pass time them where the adapter has them.
 
 use wgpu::util::DeviceExt;
 
-use super::Grid;
+use super::cpu::boundary::closing_passes;
 use super::cpu::normals::sobel_kernel;
 use super::cpu::ransac::{MAX_SCORE_POINTS, PointBatch};
+use super::{Grid, Images};
 use crate::config::PipelineConfig;
 use crate::types::Intrinsics;
 
@@ -86,46 +87,216 @@ pub struct RansacParams {
     pub max_score_points: u32,
 }
 
-/// A compute pipeline and the layout of its group 0.
-struct Stage {
-    pipeline: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
+/// The uniform of shaders/morphology.wgsl, field by field its `MorphologyParams`: one
+/// axis of a square dilation or erosion.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct MorphologyParams {
+    pub width: u32,
+    pub height: u32,
+    pub radius: u32,
+    /// 0 along rows, 1 along columns.
+    pub axis: u32,
+    /// 0 any pixel of the window (dilation), 1 all of them (erosion).
+    pub all: u32,
+    /// The value of pixels beyond the border.
+    pub outside: u32,
 }
 
-/// Buffers for one image size.
-struct ImageBuffers {
-    width: u32,
-    height: u32,
-    depth: [wgpu::Buffer; 2],
-    /// The diffusion's elimination factors.
-    factor: wgpu::Buffer,
-    normals: wgpu::Buffer,
-    magnitude: wgpu::Buffer,
-    sector: wgpu::Buffer,
-    class: wgpu::Buffer,
+/// The uniform of shaders/boundary.wgsl, field by field its `BoundaryParams`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct BoundaryParams {
+    pub width: u32,
+    pub height: u32,
+    pub depth_edge_ratio: f32,
+    pub pad: u32,
+}
+
+/// The uniform of shaders/components.wgsl, field by field its `ComponentsParams`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ComponentsParams {
+    pub width: u32,
+    pub height: u32,
+    /// 1: the components of the nonzero mask pixels; 0: of the zero ones.
+    pub inside_nonzero: u32,
+    pub pad: u32,
+}
+
+/// How a shader declares one binding of its group 0.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Access {
+    Uniform,
+    Read,
+    ReadWrite,
+}
+
+/// One WGSL file: its source and its group 0, binding by binding. Every entry point of
+/// the file shares that one layout (the unit test holds the list to the shader).
+pub struct ShaderFile {
+    pub name: &'static str,
+    pub source: &'static str,
+    pub bindings: &'static [Access],
+}
+
+use Access::{Read, ReadWrite, Uniform};
+
+pub const DIFFUSION: ShaderFile = ShaderFile {
+    name: "diffusion",
+    source: include_str!("../../shaders/diffusion.wgsl"),
+    bindings: &[Uniform, Read, ReadWrite, ReadWrite],
+};
+pub const NORMALS: ShaderFile = ShaderFile {
+    name: "normals",
+    source: include_str!("../../shaders/normals.wgsl"),
+    bindings: &[Uniform, Read, Read, ReadWrite],
+};
+pub const GRADIENT: ShaderFile = ShaderFile {
+    name: "gradient",
+    source: include_str!("../../shaders/gradient.wgsl"),
+    bindings: &[Uniform, Read, ReadWrite, ReadWrite],
+};
+pub const CLASSIFY: ShaderFile = ShaderFile {
+    name: "classify",
+    source: include_str!("../../shaders/classify.wgsl"),
+    bindings: &[Uniform, Read, Read, ReadWrite],
+};
+pub const COMPONENTS: ShaderFile = ShaderFile {
+    name: "components",
+    source: include_str!("../../shaders/components.wgsl"),
+    bindings: &[Uniform, Read, ReadWrite, ReadWrite],
+};
+pub const HYSTERESIS: ShaderFile = ShaderFile {
+    name: "hysteresis",
+    source: include_str!("../../shaders/hysteresis.wgsl"),
+    bindings: &[Uniform, Read, Read, ReadWrite, ReadWrite],
+};
+pub const MORPHOLOGY: ShaderFile = ShaderFile {
+    name: "morphology",
+    source: include_str!("../../shaders/morphology.wgsl"),
+    bindings: &[Uniform, Read, ReadWrite],
+};
+pub const BOUNDARY: ShaderFile = ShaderFile {
+    name: "boundary",
+    source: include_str!("../../shaders/boundary.wgsl"),
+    bindings: &[Uniform, Read, Read, Read, Read, Read, ReadWrite],
+};
+pub const RANSAC: ShaderFile = ShaderFile {
+    name: "ransac",
+    source: include_str!("../../shaders/ransac.wgsl"),
+    bindings: &[Uniform, Read, Read, ReadWrite],
+};
+
+/// Every shader file, for the layout test.
+pub const SHADERS: [&ShaderFile; 9] =
+    [&DIFFUSION, &NORMALS, &GRADIENT, &CLASSIFY, &COMPONENTS, &HYSTERESIS, &MORPHOLOGY, &BOUNDARY, &RANSAC];
+
+/// A compiled shader file: its group 0 layout and a pipeline per entry point used.
+struct Shader {
+    layout: wgpu::BindGroupLayout,
+    entries: Vec<(&'static str, wgpu::ComputePipeline)>,
+}
+
+impl Shader {
+    fn entry(&self, name: &str) -> &wgpu::ComputePipeline {
+        &self.entries.iter().find(|(n, _)| *n == name).expect("an entry point compiled in Gpu::new").1
+    }
 }
 
 /// The image stages' outputs, read back.
 pub struct ImageStages {
-    pub smoothed: Grid<f32>,
-    pub normals: Grid<[f32; 3]>,
-    /// Non-maximum-suppressed double-threshold classes: 0 none, 1 weak, 2 strong.
-    pub class: Grid<u8>,
-    /// Milliseconds: upload, diffusion, normals, edges (gradient + classes + readback).
-    pub times: [f64; 4],
+    /// Root + 1 of each pixel's 8-connected component of non-boundary pixels, 0 on the
+    /// boundary (shaders/components.wgsl; `cpu::components::dense_from_roots` numbers them).
+    pub regions: Grid<u32>,
+    /// The intermediate images, when asked for.
+    pub images: Option<Images>,
+    pub times: GpuTimes,
+}
+
+/// Milliseconds of one frame on the GPU. The stages are read from GPU timestamps where
+/// the adapter has them (else they are 0 and only `submit` says how long it took).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GpuTimes {
+    /// Writing the depth into the GPU's buffer.
+    pub upload: f64,
+    pub diffusion: f64,
+    pub normals: f64,
+    /// Gradient, classes, hysteresis and the closed boundary.
+    pub edges: f64,
+    /// Connected components of the non-boundary pixels.
+    pub regions: f64,
+    /// From the submit to the readback mapped, all stages included.
+    pub submit: f64,
+    /// Copying what was read back into the CPU's images.
+    pub readback: f64,
+}
+
+/// The four timed stages of the one submit, in order.
+const TIMED_STAGES: u32 = 4;
+const TIMESTAMP_BYTES: u64 = 2 * TIMED_STAGES as u64 * 8;
+
+/// Buffers, uniforms and bind groups for one image size, made once.
+struct Frame {
+    width: u32,
+    height: u32,
+    /// Depth in, and after the diffusion's last column pass the smoothed depth, in [0].
+    depth: [wgpu::Buffer; 2],
+    normals: wgpu::Buffer,
+    /// classify.wgsl's 0 / 1 weak / 2 strong.
+    class: wgpu::Buffer,
+    edges: wgpu::Buffer,
+    boundary: wgpu::Buffer,
+    regions: wgpu::Buffer,
+    strong: wgpu::Buffer,
+    /// Everything read back, one copy after another, then the timestamps.
+    readback: wgpu::Buffer,
+    /// Uniforms rewritten each frame from the config: rows, columns of the diffusion,
+    /// normals, Canny, the 8 morphology passes, boundary.
+    diffusion_params: [wgpu::Buffer; 2],
+    normals_params: wgpu::Buffer,
+    canny_params: wgpu::Buffer,
+    morphology_params: Vec<wgpu::Buffer>,
+    boundary_params: wgpu::Buffer,
+    sobel: wgpu::Buffer,
+    groups: FrameGroups,
+    timestamps: Option<(wgpu::QuerySet, wgpu::Buffer)>,
+}
+
+struct FrameGroups {
+    diffusion: [wgpu::BindGroup; 2],
+    normals: wgpu::BindGroup,
+    gradient: wgpu::BindGroup,
+    classify: wgpu::BindGroup,
+    edge_components: wgpu::BindGroup,
+    hysteresis: wgpu::BindGroup,
+    lines: wgpu::BindGroup,
+    morphology: Vec<wgpu::BindGroup>,
+    holes: wgpu::BindGroup,
+    seal: wgpu::BindGroup,
+    regions: wgpu::BindGroup,
 }
 
 pub struct Gpu {
     device: wgpu::Device,
     queue: wgpu::Queue,
     pub info: wgpu::AdapterInfo,
-    diffusion: Stage,
-    normals: Stage,
-    gradient: Stage,
-    classify: Stage,
-    ransac: Stage,
-    images: Option<ImageBuffers>,
+    diffusion: Shader,
+    normals: Shader,
+    gradient: Shader,
+    classify: Shader,
+    components: Shader,
+    hysteresis: Shader,
+    morphology: Shader,
+    boundary: Shader,
+    ransac: Shader,
+    timestamps: bool,
+    frame: Option<Frame>,
 }
+
+/// Usages of every image buffer: bound as storage, filled and read back by copies.
+const IMAGE: wgpu::BufferUsages =
+    wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC).union(wgpu::BufferUsages::COPY_DST);
 
 impl Gpu {
     /// Opens the first Vulkan adapter (a real GPU preferred over a software one).
@@ -140,41 +311,85 @@ impl Gpu {
         }))
         .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
         let info = adapter.get_info();
+        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("polymap"),
             required_limits: adapter.limits(),
+            required_features: if timestamps { wgpu::Features::TIMESTAMP_QUERY } else { wgpu::Features::empty() },
             ..Default::default()
         }))
         .map_err(|e| GpuError::NoDevice { adapter: info.name.clone(), reason: e.to_string() })?;
-        let stage = |source: &str, entry: &str| {
+        let compile = |file: &ShaderFile, entries: &[&'static str]| {
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(entry),
-                source: wgpu::ShaderSource::Wgsl(source.into()),
+                label: Some(file.name),
+                source: wgpu::ShaderSource::Wgsl(file.source.into()),
             });
-            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: None,
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
+            let layout_entries: Vec<wgpu::BindGroupLayoutEntry> = file
+                .bindings
+                .iter()
+                .enumerate()
+                .map(|(binding, access)| wgpu::BindGroupLayoutEntry {
+                    binding: binding as u32,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: match access {
+                            Uniform => wgpu::BufferBindingType::Uniform,
+                            Read => wgpu::BufferBindingType::Storage { read_only: true },
+                            ReadWrite => wgpu::BufferBindingType::Storage { read_only: false },
+                        },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                })
+                .collect();
+            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(file.name),
+                entries: &layout_entries,
             });
-            let layout = pipeline.get_bind_group_layout(0);
-            Stage { pipeline, layout }
+            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(file.name),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            });
+            let entries = entries
+                .iter()
+                .map(|&entry| {
+                    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some(entry),
+                        layout: Some(&pipeline_layout),
+                        module: &module,
+                        entry_point: Some(entry),
+                        compilation_options: Default::default(),
+                        cache: None,
+                    });
+                    (entry, pipeline)
+                })
+                .collect();
+            Shader { layout, entries }
         };
         // A shader the driver rejects is an error to report, not wgpu's default panic.
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let (diffusion, normals, gradient, classify, ransac) = (
-            stage(include_str!("../../shaders/diffusion.wgsl"), "main"),
-            stage(include_str!("../../shaders/normals.wgsl"), "main"),
-            stage(include_str!("../../shaders/gradient.wgsl"), "main"),
-            stage(include_str!("../../shaders/classify.wgsl"), "main"),
-            stage(include_str!("../../shaders/ransac.wgsl"), "main"),
-        );
+        let gpu = Gpu {
+            diffusion: compile(&DIFFUSION, &["main"]),
+            normals: compile(&NORMALS, &["main"]),
+            gradient: compile(&GRADIENT, &["main"]),
+            classify: compile(&CLASSIFY, &["main"]),
+            components: compile(&COMPONENTS, &["init", "merge", "flatten"]),
+            hysteresis: compile(&HYSTERESIS, &["mark_strong", "keep"]),
+            morphology: compile(&MORPHOLOGY, &["main"]),
+            boundary: compile(&BOUNDARY, &["lines", "holes", "seal"]),
+            ransac: compile(&RANSAC, &["main"]),
+            device: device.clone(),
+            queue,
+            info,
+            timestamps,
+            frame: None,
+        };
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(e.to_string()));
         }
-        Ok(Gpu { diffusion, normals, gradient, classify, ransac, device, queue, info, images: None })
+        Ok(gpu)
     }
 
     /// Whether the adapter is a software rasteriser (lavapipe, SwiftShader).
@@ -190,11 +405,16 @@ impl Gpu {
         )
     }
 
-    fn storage(&self, label: &str, bytes: u64) -> wgpu::Buffer {
+    /// Whether the stage times come from GPU timestamps.
+    pub fn has_timestamps(&self) -> bool {
+        self.timestamps
+    }
+
+    fn buffer(&self, label: &str, bytes: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
         self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
             size: bytes.max(4),
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            usage,
             mapped_at_creation: false,
         })
     }
@@ -203,36 +423,26 @@ impl Gpu {
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("params"),
             contents: bytes,
-            usage: wgpu::BufferUsages::UNIFORM,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         })
     }
 
-    /// A bind group of (binding, buffer) pairs: only the bindings the entry point uses,
-    /// as its derived layout holds no others.
-    fn bind(&self, stage: &Stage, buffers: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
+    /// A bind group of a shader file's layout: buffer k at binding k.
+    fn bind(&self, shader: &Shader, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
         let entries: Vec<wgpu::BindGroupEntry> = buffers
             .iter()
-            .map(|(i, b)| wgpu::BindGroupEntry { binding: *i, resource: b.as_entire_binding() })
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
             .collect();
         self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: None,
-            layout: &stage.layout,
+            layout: &shader.layout,
             entries: &entries,
         })
     }
 
-    /// Records `dispatches` of one stage each with its bind group, submits, and waits.
-    fn run(&self, stage: &Stage, dispatches: &[(&wgpu::BindGroup, [u32; 2])]) -> Result<(), GpuError> {
-        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&stage.pipeline);
-            for (group, [x, y]) in dispatches {
-                pass.set_bind_group(0, *group, &[]);
-                pass.dispatch_workgroups(*x, *y, 1);
-            }
-        }
+    /// Submits `encoder`, waits for the GPU, and reports a validation error as `Dispatch`.
+    fn submit(&self, encoder: wgpu::CommandEncoder, scope: wgpu::ErrorScopeGuard) -> Result<(), GpuError> {
         self.queue.submit([encoder.finish()]);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Dispatch(e.to_string()));
@@ -241,129 +451,374 @@ impl Gpu {
         Ok(())
     }
 
-    /// Copies `buffer`'s first `bytes` bytes back to the CPU.
-    fn read(&self, buffer: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>, GpuError> {
-        let bytes = bytes.max(4);
-        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("readback"),
-            size: bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, bytes);
-        self.queue.submit([encoder.finish()]);
-        let slice = staging.slice(..);
+    /// Maps `staging` (filled by the submit just done), hands its first `bytes` to `read`, unmaps.
+    fn map<T>(&self, staging: &wgpu::Buffer, bytes: u64, read: impl FnOnce(&[u8]) -> T) -> Result<T, GpuError> {
+        let slice = staging.slice(..bytes.max(4));
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
         });
         self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
         rx.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
-        let data = slice.get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?.to_vec();
-        Ok(data)
+        let out = read(&slice.get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?);
+        staging.unmap();
+        Ok(out)
     }
 
-    fn images_for(&mut self, width: u32, height: u32) -> &ImageBuffers {
-        if self.images.as_ref().is_none_or(|b| b.width != width || b.height != height) {
-            let n = width as u64 * height as u64;
-            self.images = Some(ImageBuffers {
-                width,
-                height,
-                depth: [self.storage("depth a", n * 4), self.storage("depth b", n * 4)],
-                factor: self.storage("diffusion factors", n * 4),
-                normals: self.storage("normals", n * 12),
-                magnitude: self.storage("magnitude", n * 4),
-                sector: self.storage("sector", n * 4),
-                class: self.storage("class", n * 4),
-            });
+    /// Records one compute pass of `(pipeline, bind group, workgroups)` dispatches, with
+    /// timestamps `2k` and `2k + 1` around it when the frame has a query set.
+    fn pass(encoder: &mut wgpu::CommandEncoder, timestamps: Option<&wgpu::QuerySet>, k: u32, dispatches: &[Dispatch]) {
+        let timestamp_writes = timestamps.map(|query_set| wgpu::ComputePassTimestampWrites {
+            query_set,
+            beginning_of_pass_write_index: Some(2 * k),
+            end_of_pass_write_index: Some(2 * k + 1),
+        });
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
+        for (pipeline, group, [x, y]) in dispatches {
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, *group, &[]);
+            pass.dispatch_workgroups(*x, *y, 1);
         }
-        self.images.as_ref().expect("just made")
     }
 
-    /// Diffusion, normals, and the per-pixel half of Canny for one depth image (m).
+    /// The dispatches of shaders/components.wgsl over one bind group.
+    fn components_dispatches<'a>(&'a self, group: &'a wgpu::BindGroup, size: [u32; 2]) -> [Dispatch<'a>; 3] {
+        let c = &self.components;
+        [(c.entry("init"), group, size), (c.entry("merge"), group, size), (c.entry("flatten"), group, size)]
+    }
+
+    fn frame_for(&mut self, width: u32, height: u32) {
+        if self.frame.as_ref().is_some_and(|f| f.width == width && f.height == height) {
+            return;
+        }
+        let n = width as u64 * height as u64;
+        let image = |label: &str, bytes_per_pixel: u64| self.buffer(label, n * bytes_per_pixel, IMAGE);
+        let depth = [image("depth a", 4), image("depth b", 4)];
+        let factor = image("diffusion factors", 4);
+        let normals = image("normals", 12);
+        let (magnitude, sector, class) = (image("magnitude", 4), image("sector", 4), image("class", 4));
+        let (parent, edge_labels, strong, edges) =
+            (image("parent", 4), image("edge labels", 4), image("strong", 4), image("edges", 4));
+        let (lines, closed, holes, sealed, boundary) =
+            (image("lines", 4), image("closed", 4), image("holes", 4), image("sealed", 4), image("boundary", 4));
+        let scratch = [image("morphology a", 4), image("morphology b", 4)];
+        let regions = image("regions", 4);
+        // Regions, smoothed depth, normals (3), edges, boundary: 7 words a pixel at most.
+        let readback = self.buffer(
+            "readback",
+            n * 4 * 7 + TIMESTAMP_BYTES,
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
+        let zeros = |bytes: usize| self.uniform(&vec![0u8; bytes]);
+        let diffusion_params = [zeros(size_of::<DiffusionParams>()), zeros(size_of::<DiffusionParams>())];
+        let normals_params = zeros(size_of::<NormalsParams>());
+        let canny_params = zeros(size_of::<CannyParams>());
+        let morphology_params: Vec<wgpu::Buffer> = (0..8).map(|_| zeros(size_of::<MorphologyParams>())).collect();
+        let boundary_params = zeros(size_of::<BoundaryParams>());
+        let components_params = |inside_nonzero| {
+            self.uniform(bytemuck::bytes_of(&ComponentsParams { width, height, inside_nonzero, pad: 0 }))
+        };
+        let (edge_params, region_params) = (components_params(1), components_params(0));
+        let sobel = self.buffer("sobel", 14 * 4, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST);
+        // Closing: lines -> a -> b -> a -> closed; sealing: holes -> a -> b -> a -> sealed.
+        let [a, b] = &scratch;
+        let morphology_io = [(&lines, a), (a, b), (b, a), (a, &closed), (&holes, a), (a, b), (b, a), (a, &sealed)];
+        let groups = FrameGroups {
+            diffusion: [
+                self.bind(&self.diffusion, &[&diffusion_params[0], &depth[0], &depth[1], &factor]),
+                self.bind(&self.diffusion, &[&diffusion_params[1], &depth[1], &depth[0], &factor]),
+            ],
+            normals: self.bind(&self.normals, &[&normals_params, &depth[0], &sobel, &normals]),
+            gradient: self.bind(&self.gradient, &[&canny_params, &normals, &magnitude, &sector]),
+            classify: self.bind(&self.classify, &[&canny_params, &magnitude, &sector, &class]),
+            edge_components: self.bind(&self.components, &[&edge_params, &class, &parent, &edge_labels]),
+            hysteresis: self.bind(&self.hysteresis, &[&canny_params, &class, &edge_labels, &strong, &edges]),
+            lines: self
+                .bind(&self.boundary, &[&boundary_params, &depth[0], &normals, &edges, &closed, &sealed, &lines]),
+            morphology: morphology_io
+                .iter()
+                .zip(&morphology_params)
+                .map(|((src, dst), params)| self.bind(&self.morphology, &[params, src, dst]))
+                .collect(),
+            holes: self
+                .bind(&self.boundary, &[&boundary_params, &depth[0], &normals, &edges, &closed, &sealed, &holes]),
+            seal: self
+                .bind(&self.boundary, &[&boundary_params, &depth[0], &normals, &edges, &closed, &sealed, &boundary]),
+            regions: self.bind(&self.components, &[&region_params, &boundary, &parent, &regions]),
+        };
+        let timestamps = self.timestamps.then(|| {
+            let set = self.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("stage timestamps"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2 * TIMED_STAGES,
+            });
+            let resolved = self.buffer(
+                "timestamps",
+                TIMESTAMP_BYTES,
+                wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            );
+            (set, resolved)
+        });
+        self.frame = Some(Frame {
+            width,
+            height,
+            depth,
+            normals,
+            class,
+            edges,
+            boundary,
+            regions,
+            strong,
+            readback,
+            diffusion_params,
+            normals_params,
+            canny_params,
+            morphology_params,
+            boundary_params,
+            sobel,
+            groups,
+            timestamps,
+        });
+    }
+
+    /// Writes every stage's uniform from the config and the image's size.
+    fn write_uniforms(&self, w: u32, h: u32, intr: Option<&Intrinsics>, cfg: &PipelineConfig) {
+        let f = self.frame.as_ref().expect("frame_for before");
+        let q = &self.queue;
+        let (step, inv_kappa) =
+            (cfg.diffusion_time as f32 / diffusion_steps(cfg).max(1) as f32, 1.0 / cfg.diffusion_kappa_m as f32);
+        let rows = DiffusionParams { len: w, lines: h, line_stride: w, elem_stride: 1, step, inv_kappa };
+        let columns = DiffusionParams { len: h, lines: w, line_stride: 1, elem_stride: w, step, inv_kappa };
+        q.write_buffer(&f.diffusion_params[0], 0, bytemuck::bytes_of(&rows));
+        q.write_buffer(&f.diffusion_params[1], 0, bytemuck::bytes_of(&columns));
+        let (smooth, deriv, norm) = sobel_kernel(cfg.normal_kernel);
+        let mut weights = [0.0f32; 14];
+        weights[..smooth.len()].copy_from_slice(smooth);
+        weights[7..7 + deriv.len()].copy_from_slice(deriv);
+        q.write_buffer(&f.sobel, 0, bytemuck::cast_slice(&weights));
+        if let Some(intr) = intr {
+            let normals = NormalsParams {
+                width: w,
+                height: h,
+                radius: cfg.normal_kernel / 2,
+                norm,
+                fx: intr.fx as f32,
+                fy: intr.fy as f32,
+                cx: intr.cx as f32,
+                cy: intr.cy as f32,
+            };
+            q.write_buffer(&f.normals_params, 0, bytemuck::bytes_of(&normals));
+        }
+        let canny = CannyParams { width: w, height: h, low: cfg.canny_low as f32, high: cfg.canny_high as f32 };
+        q.write_buffer(&f.canny_params, 0, bytemuck::bytes_of(&canny));
+        // The lines are closed with the closing square, the pixels without normals sealed with the normal kernel's.
+        let closing = closing_passes(w, h, cfg.closing_kernel_px);
+        let seal = closing_passes(w, h, cfg.normal_kernel);
+        for (buffer, params) in f.morphology_params.iter().zip(closing.iter().chain(&seal)) {
+            q.write_buffer(buffer, 0, bytemuck::bytes_of(params));
+        }
+        let boundary = BoundaryParams { width: w, height: h, depth_edge_ratio: cfg.depth_edge_ratio as f32, pad: 0 };
+        q.write_buffer(&f.boundary_params, 0, bytemuck::bytes_of(&boundary));
+    }
+
+    /// Hysteresis from the classes: edge components, strong ones marked, their pixels kept.
+    fn hysteresis_dispatches(&self, size: [u32; 2]) -> Vec<Dispatch<'_>> {
+        let g = &self.frame.as_ref().expect("frame_for before").groups;
+        let mut out = self.components_dispatches(&g.edge_components, size).to_vec();
+        out.push((self.hysteresis.entry("mark_strong"), &g.hysteresis, size));
+        out.push((self.hysteresis.entry("keep"), &g.hysteresis, size));
+        out
+    }
+
+    /// The boundary from the edges, the smoothed depth and the normals: lines, closing,
+    /// holes, sealing, the 4-neighbour growth.
+    fn boundary_dispatches(&self, size: [u32; 2]) -> Vec<Dispatch<'_>> {
+        let g = &self.frame.as_ref().expect("frame_for before").groups;
+        let morph = self.morphology.entry("main");
+        let mut out = vec![(self.boundary.entry("lines"), &g.lines, size)];
+        out.extend(g.morphology[..4].iter().map(|group| (morph, group, size)));
+        out.push((self.boundary.entry("holes"), &g.holes, size));
+        out.extend(g.morphology[4..].iter().map(|group| (morph, group, size)));
+        out.push((self.boundary.entry("seal"), &g.seal, size));
+        out
+    }
+
+    /// Copies `outputs` one after another into the readback buffer (and the timestamps
+    /// after them, if resolved), submits, and hands the words read back to `read`.
+    fn submit_and_read<T>(
+        &self,
+        mut encoder: wgpu::CommandEncoder,
+        scope: wgpu::ErrorScopeGuard,
+        outputs: &[(&wgpu::Buffer, u64)],
+        read: impl FnOnce(&[u32], Option<&[u64]>) -> T,
+    ) -> Result<T, GpuError> {
+        let f = self.frame.as_ref().expect("frame_for before");
+        let mut at = 0;
+        for (buffer, bytes) in outputs {
+            encoder.copy_buffer_to_buffer(buffer, 0, &f.readback, at, *bytes);
+            at += bytes;
+        }
+        let stamped = f.timestamps.as_ref().map(|(set, resolved)| {
+            encoder.resolve_query_set(set, 0..2 * TIMED_STAGES, resolved, 0);
+            encoder.copy_buffer_to_buffer(resolved, 0, &f.readback, at, TIMESTAMP_BYTES);
+        });
+        self.submit(encoder, scope)?;
+        let bytes = at + if stamped.is_some() { TIMESTAMP_BYTES } else { 0 };
+        self.map(&f.readback, bytes, |data| {
+            let (words, stamps) = data.split_at(at as usize);
+            // The stamps sit at a multiple of 4 bytes: copy them out rather than cast in place.
+            let stamps: Vec<u64> =
+                stamps.chunks_exact(8).map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes"))).collect();
+            read(bytemuck::cast_slice(words), stamped.map(|_| stamps.as_slice()))
+        })
+    }
+
+    /// The per-pixel stages of one depth image (m), in one submit: diffusion, normals,
+    /// Canny with hysteresis, the closed boundary, and the connected regions inside it.
+    /// One readback: the region labels, and with `images` the intermediate images too.
     pub fn image_stages(
         &mut self,
         depth: &Grid<f32>,
         intr: &Intrinsics,
         cfg: &PipelineConfig,
+        images: bool,
     ) -> Result<ImageStages, GpuError> {
-        let kernel = cfg.normal_kernel;
-        let (low, high) = (cfg.canny_low as f32, cfg.canny_high as f32);
         let (w, h) = (depth.width as u32, depth.height as u32);
         let n = w as u64 * h as u64;
-        let groups = [w.div_ceil(16), h.div_ceil(16)];
         let mut lap = super::stopwatch();
-        self.images_for(w, h);
-        let b = self.images.as_ref().expect("made above");
-        self.queue.write_buffer(&b.depth[0], 0, bytemuck::cast_slice(&depth.data));
+        self.frame_for(w, h);
+        let f = self.frame.as_ref().expect("made above");
+        self.queue.write_buffer(&f.depth[0], 0, bytemuck::cast_slice(&depth.data));
+        self.write_uniforms(w, h, Some(intr), cfg);
         let upload = lap();
 
-        // A step: rows from depth a into b, then columns from b back into a.
-        let steps = if cfg.diffusion_time > 0.0 { cfg.diffusion_steps } else { 0 };
-        let step = cfg.diffusion_time as f32 / steps.max(1) as f32;
-        let inv_kappa = 1.0 / cfg.diffusion_kappa_m as f32;
-        let rows = DiffusionParams { len: w, lines: h, line_stride: w, elem_stride: 1, step, inv_kappa };
-        let columns = DiffusionParams { len: h, lines: w, line_stride: 1, elem_stride: w, step, inv_kappa };
-        let (rows_params, columns_params) =
-            (self.uniform(bytemuck::bytes_of(&rows)), self.uniform(bytemuck::bytes_of(&columns)));
-        let along_rows =
-            self.bind(&self.diffusion, &[(0, &rows_params), (1, &b.depth[0]), (2, &b.depth[1]), (3, &b.factor)]);
-        let along_columns =
-            self.bind(&self.diffusion, &[(0, &columns_params), (1, &b.depth[1]), (2, &b.depth[0]), (3, &b.factor)]);
-        let passes: Vec<_> = (0..steps)
-            .flat_map(|_| [(&along_rows, [h.div_ceil(64), 1]), (&along_columns, [w.div_ceil(64), 1])])
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.clear_buffer(&f.strong, 0, None);
+        let g = &f.groups;
+        let size = [w.div_ceil(16), h.div_ceil(16)];
+        let set = f.timestamps.as_ref().map(|(set, _)| set);
+        // A diffusion step: rows from depth a into b, then columns from b back into a.
+        let diffuse = self.diffusion.entry("main");
+        let steps: Vec<Dispatch> = (0..diffusion_steps(cfg))
+            .flat_map(|_| {
+                [(diffuse, &g.diffusion[0], [h.div_ceil(64), 1]), (diffuse, &g.diffusion[1], [w.div_ceil(64), 1])]
+            })
             .collect();
-        self.run(&self.diffusion, &passes)?;
-        let smoothed_buf = &b.depth[0];
-        let diffusion = lap();
+        Self::pass(&mut encoder, set, 0, &steps);
+        Self::pass(&mut encoder, set, 1, &[(self.normals.entry("main"), &g.normals, size)]);
+        let mut edges =
+            vec![(self.gradient.entry("main"), &g.gradient, size), (self.classify.entry("main"), &g.classify, size)];
+        edges.extend(self.hysteresis_dispatches(size));
+        edges.extend(self.boundary_dispatches(size));
+        Self::pass(&mut encoder, set, 2, &edges);
+        Self::pass(&mut encoder, set, 3, &self.components_dispatches(&g.regions, size));
 
-        let (smooth, deriv, norm) = sobel_kernel(kernel);
-        let mut weights = [0.0f32; 14];
-        weights[..smooth.len()].copy_from_slice(smooth);
-        weights[7..7 + deriv.len()].copy_from_slice(deriv);
-        let weights = self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("sobel"),
-            contents: bytemuck::cast_slice(&weights),
-            usage: wgpu::BufferUsages::STORAGE,
-        });
-        let params = self.uniform(bytemuck::bytes_of(&NormalsParams {
-            width: w,
-            height: h,
-            radius: kernel / 2,
-            norm,
-            fx: intr.fx as f32,
-            fy: intr.fy as f32,
-            cx: intr.cx as f32,
-            cy: intr.cy as f32,
-        }));
-        let group = self.bind(&self.normals, &[(0, &params), (1, smoothed_buf), (2, &weights), (3, &b.normals)]);
-        self.run(&self.normals, &[(&group, groups)])?;
-        let normals_ms = lap();
+        let mut outputs = vec![(&f.regions, n * 4)];
+        if images {
+            outputs.extend([(&f.depth[0], n * 4), (&f.normals, n * 12), (&f.edges, n * 4), (&f.boundary, n * 4)]);
+        }
+        let (w, h, n) = (w as usize, h as usize, n as usize);
+        fn grid<T>(w: usize, h: usize, data: Vec<T>) -> Grid<T> {
+            Grid { width: w, height: h, data }
+        }
+        let period_ms = self.queue.get_timestamp_period() as f64 * 1e-6;
+        let mut times = GpuTimes { upload, ..Default::default() };
+        let (regions, images) = self.submit_and_read(encoder, scope, &outputs, |words, stamps| {
+            times.submit = lap();
+            if let Some(ticks) = stamps {
+                let ms = |k: usize| ticks[2 * k + 1].saturating_sub(ticks[2 * k]) as f64 * period_ms;
+                [times.diffusion, times.normals, times.edges, times.regions] = [ms(0), ms(1), ms(2), ms(3)];
+            }
+            let floats = |k: usize, per: usize| bytemuck::cast_slice::<u32, f32>(&words[k * n..(k + per) * n]);
+            let bytes = |k: usize| words[k * n..(k + 1) * n].iter().map(|&b| b as u8).collect::<Vec<u8>>();
+            let images = images.then(|| Images {
+                smoothed: grid(w, h, floats(1, 1).to_vec()),
+                normals: grid(w, h, floats(2, 3).chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()),
+                canny: grid(w, h, bytes(5)),
+                boundary: grid(w, h, bytes(6)),
+            });
+            (grid(w, h, words[..n].to_vec()), images)
+        })?;
+        times.readback = lap();
+        Ok(ImageStages { regions, images, times })
+    }
 
-        let params = self.uniform(bytemuck::bytes_of(&CannyParams { width: w, height: h, low, high }));
-        let group = self.bind(&self.gradient, &[(0, &params), (1, &b.normals), (2, &b.magnitude), (3, &b.sector)]);
-        self.run(&self.gradient, &[(&group, groups)])?;
-        let group = self.bind(&self.classify, &[(0, &params), (2, &b.magnitude), (3, &b.sector), (4, &b.class)]);
-        self.run(&self.classify, &[(&group, groups)])?;
-        let edges = lap();
+    /// Runs `dispatches` alone on inputs written into the frame's buffers, and reads `output` back.
+    fn stage_alone(
+        &self,
+        inputs: &[(&wgpu::Buffer, &[u8])],
+        dispatches: &[Dispatch],
+        output: &wgpu::Buffer,
+        bytes: u64,
+    ) -> Result<Vec<u32>, GpuError> {
+        let f = self.frame.as_ref().expect("frame_for before");
+        for (buffer, data) in inputs {
+            self.queue.write_buffer(buffer, 0, data);
+        }
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.clear_buffer(&f.strong, 0, None);
+        Self::pass(&mut encoder, None, 0, dispatches);
+        self.submit_and_read(encoder, scope, &[(output, bytes)], |words, _| words.to_vec())
+    }
 
-        let grid = |data| Grid { width: w as usize, height: h as usize, data };
-        let smoothed: Vec<f32> = bytemuck::cast_slice(&self.read(smoothed_buf, n * 4)?).to_vec();
-        let normals: Vec<[f32; 3]> = bytemuck::cast_slice::<u8, f32>(&self.read(&b.normals, n * 12)?)
-            .chunks_exact(3)
-            .map(|c| [c[0], c[1], c[2]])
-            .collect();
-        // The gradient's magnitude and sector stay on the GPU: only classify reads them.
-        let class: Vec<u32> = bytemuck::cast_slice(&self.read(&b.class, n * 4)?).to_vec();
-        // Readbacks count to the edges stage, the last one.
-        let readback = lap();
-        Ok(ImageStages {
-            smoothed: grid(smoothed),
-            normals: Grid { width: w as usize, height: h as usize, data: normals },
-            class: Grid { width: w as usize, height: h as usize, data: class.into_iter().map(|c| c as u8).collect() },
-            times: [upload, diffusion, normals_ms, edges + readback],
-        })
+    /// Hysteresis alone on the GPU, from classify's classes: the stage's GPU-vs-CPU test.
+    pub fn hysteresis_alone(&mut self, class: &Grid<u8>, cfg: &PipelineConfig) -> Result<Grid<u8>, GpuError> {
+        let (w, h) = (class.width as u32, class.height as u32);
+        self.frame_for(w, h);
+        self.write_uniforms(w, h, None, cfg);
+        let f = self.frame.as_ref().expect("made above");
+        let class32: Vec<u32> = class.data.iter().map(|&c| c as u32).collect();
+        let size = [w.div_ceil(16), h.div_ceil(16)];
+        let words = self.stage_alone(
+            &[(&f.class, bytemuck::cast_slice(&class32))],
+            &self.hysteresis_dispatches(size),
+            &f.edges,
+            class.data.len() as u64 * 4,
+        )?;
+        Ok(Grid { width: class.width, height: class.height, data: words.into_iter().map(|e| e as u8).collect() })
+    }
+
+    /// The closed boundary alone on the GPU, from Canny's edges, the smoothed depth and the normals.
+    pub fn boundary_alone(
+        &mut self,
+        canny: &Grid<u8>,
+        smoothed: &Grid<f32>,
+        normals: &Grid<[f32; 3]>,
+        cfg: &PipelineConfig,
+    ) -> Result<Grid<u8>, GpuError> {
+        let (w, h) = (canny.width as u32, canny.height as u32);
+        self.frame_for(w, h);
+        self.write_uniforms(w, h, None, cfg);
+        let f = self.frame.as_ref().expect("made above");
+        let edges: Vec<u32> = canny.data.iter().map(|&c| c as u32).collect();
+        let inputs: [(&wgpu::Buffer, &[u8]); 3] = [
+            (&f.edges, bytemuck::cast_slice(&edges)),
+            (&f.depth[0], bytemuck::cast_slice(&smoothed.data)),
+            (&f.normals, bytemuck::cast_slice(&normals.data)),
+        ];
+        let size = [w.div_ceil(16), h.div_ceil(16)];
+        let words =
+            self.stage_alone(&inputs, &self.boundary_dispatches(size), &f.boundary, canny.data.len() as u64 * 4)?;
+        Ok(Grid { width: canny.width, height: canny.height, data: words.into_iter().map(|b| b as u8).collect() })
+    }
+
+    /// The regions' components alone on the GPU, from a boundary: root + 1 labels.
+    pub fn regions_alone(&mut self, boundary: &Grid<u8>) -> Result<Grid<u32>, GpuError> {
+        let (w, h) = (boundary.width as u32, boundary.height as u32);
+        self.frame_for(w, h);
+        let f = self.frame.as_ref().expect("made above");
+        let mask: Vec<u32> = boundary.data.iter().map(|&b| b as u32).collect();
+        let size = [w.div_ceil(16), h.div_ceil(16)];
+        let dispatches = self.components_dispatches(&f.groups.regions, size);
+        let words = self.stage_alone(
+            &[(&f.boundary, bytemuck::cast_slice(&mask))],
+            &dispatches,
+            &f.regions,
+            mask.len() as u64 * 4,
+        )?;
+        Ok(Grid { width: boundary.width, height: boundary.height, data: words })
     }
 
     /// Inlier counts of every (region, hypothesis), row-major by region: one dispatch
@@ -389,18 +844,37 @@ impl Gpu {
         let points = init("points", bytemuck::cast_slice(&batch.points));
         let ranges: Vec<[u32; 2]> = batch.ranges.iter().map(|r| [r.start as u32, (r.end - r.start) as u32]).collect();
         let ranges = init("ranges", bytemuck::cast_slice(&ranges));
-        let scores = self.storage("scores", total as u64 * 4);
+        let bytes = total as u64 * 4;
+        let scores = self.buffer("scores", bytes, IMAGE);
         let params = self.uniform(bytemuck::bytes_of(&RansacParams {
             hypotheses,
             regions,
             inlier_distance,
             max_score_points: MAX_SCORE_POINTS as u32,
         }));
-        let group = self.bind(&self.ransac, &[(0, &params), (1, &points), (2, &ranges), (3, &scores)]);
+        let group = self.bind(&self.ransac, &[&params, &points, &ranges, &scores]);
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let mut encoder = self.device.create_command_encoder(&Default::default());
         // At most 65535 workgroups per dimension: wrap into y.
-        self.run(&self.ransac, &[(&group, [total.min(65535), total.div_ceil(65535)])])?;
-        Ok(bytemuck::cast_slice(&self.read(&scores, total as u64 * 4)?).to_vec())
+        Self::pass(
+            &mut encoder,
+            None,
+            0,
+            &[(self.ransac.entry("main"), &group, [total.min(65535), total.div_ceil(65535)])],
+        );
+        let staging = self.buffer("scores read", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
+        encoder.copy_buffer_to_buffer(&scores, 0, &staging, 0, bytes);
+        self.submit(encoder, scope)?;
+        self.map(&staging, bytes, |data| bytemuck::cast_slice(data).to_vec())
     }
+}
+
+/// One dispatch: a pipeline, its bind group, and the workgroups along x and y.
+type Dispatch<'a> = (&'a wgpu::ComputePipeline, &'a wgpu::BindGroup, [u32; 2]);
+
+/// The diffusion's steps: none when there is no time to diffuse for.
+fn diffusion_steps(cfg: &PipelineConfig) -> u32 {
+    if cfg.diffusion_time > 0.0 { cfg.diffusion_steps } else { 0 }
 }
 
 #[cfg(test)]
@@ -439,7 +913,7 @@ mod tests {
     #[test]
     fn every_stage_s_uniform_is_the_struct_its_shader_declares() {
         assert_declared_as(
-            include_str!("../../shaders/diffusion.wgsl"),
+            DIFFUSION.source,
             "DiffusionParams",
             fields!(DiffusionParams {
                 len: u32,
@@ -452,7 +926,7 @@ mod tests {
             size_of::<DiffusionParams>(),
         );
         assert_declared_as(
-            include_str!("../../shaders/normals.wgsl"),
+            NORMALS.source,
             "NormalsParams",
             fields!(NormalsParams {
                 width: u32,
@@ -466,19 +940,68 @@ mod tests {
             }),
             size_of::<NormalsParams>(),
         );
-        for source in [include_str!("../../shaders/gradient.wgsl"), include_str!("../../shaders/classify.wgsl")] {
+        for file in [&GRADIENT, &CLASSIFY, &HYSTERESIS] {
             assert_declared_as(
-                source,
+                file.source,
                 "CannyParams",
                 fields!(CannyParams { width: u32, height: u32, low: f32, high: f32 }),
                 size_of::<CannyParams>(),
             );
         }
         assert_declared_as(
-            include_str!("../../shaders/ransac.wgsl"),
+            MORPHOLOGY.source,
+            "MorphologyParams",
+            fields!(MorphologyParams { width: u32, height: u32, radius: u32, axis: u32, all: u32, outside: u32 }),
+            size_of::<MorphologyParams>(),
+        );
+        assert_declared_as(
+            BOUNDARY.source,
+            "BoundaryParams",
+            fields!(BoundaryParams { width: u32, height: u32, depth_edge_ratio: f32, pad: u32 }),
+            size_of::<BoundaryParams>(),
+        );
+        assert_declared_as(
+            COMPONENTS.source,
+            "ComponentsParams",
+            fields!(ComponentsParams { width: u32, height: u32, inside_nonzero: u32, pad: u32 }),
+            size_of::<ComponentsParams>(),
+        );
+        assert_declared_as(
+            RANSAC.source,
             "RansacParams",
             fields!(RansacParams { hypotheses: u32, regions: u32, inlier_distance: f32, max_score_points: u32 }),
             size_of::<RansacParams>(),
         );
+    }
+
+    #[test]
+    fn every_shader_is_valid_and_binds_the_layout_the_rust_side_makes() {
+        for file in SHADERS {
+            let module = naga::front::wgsl::parse_str(file.source).unwrap_or_else(|e| panic!("{}: {e}", file.name));
+            // What the device checks when it compiles: caught here without a GPU.
+            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
+                .validate(&module)
+                .unwrap_or_else(|e| panic!("{}: {e:?}", file.name));
+            let mut declared: Vec<(u32, Access)> = module
+                .global_variables
+                .iter()
+                .filter_map(|(_, var)| {
+                    let binding = var.binding.as_ref()?;
+                    assert_eq!(binding.group, 0, "{}: {:?} outside group 0", file.name, var.name);
+                    let access = match var.space {
+                        naga::AddressSpace::Uniform => Access::Uniform,
+                        naga::AddressSpace::Storage { access } if access.contains(naga::StorageAccess::STORE) => {
+                            Access::ReadWrite
+                        }
+                        naga::AddressSpace::Storage { .. } => Access::Read,
+                        other => panic!("{}: {:?} in {other:?}", file.name, var.name),
+                    };
+                    Some((binding.binding, access))
+                })
+                .collect();
+            declared.sort_by_key(|(b, _)| *b);
+            let made: Vec<(u32, Access)> = file.bindings.iter().enumerate().map(|(b, a)| (b as u32, *a)).collect();
+            assert_eq!(declared, made, "{}: the shader's bindings against ShaderFile::bindings", file.name);
+        }
     }
 }

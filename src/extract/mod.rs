@@ -2,8 +2,10 @@
 //! camera frame.
 //!
 //! Stages: diffusion -> normals -> Canny on normals (+ depth steps, no-normal pixels)
-//! -> close -> regions with holes (CPU) -> batched RANSAC + refit -> polygons ray cast
-//! onto their planes. Each image stage has a CPU twin in `cpu/`.
+//! -> close -> connected regions -> batched RANSAC + refit -> leaks split, coplanar
+//! pieces joined, regions grown -> polygons ray cast onto their planes. Every stage up
+//! to the regions is a WGSL shader in shaders/ with its CPU twin in `cpu/`; one
+//! orchestration (`extract_with`) runs a frame on either twin.
 
 pub mod cloud;
 pub mod contours;
@@ -42,28 +44,45 @@ pub enum ExtractError {
 /// Milliseconds spent in each stage of one frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct StageTimes {
+    /// Depth units to metres, and on the GPU writing them into its buffer.
     pub upload: f64,
     pub diffusion: f64,
     pub normals: f64,
+    /// Gradient, classes, hysteresis and the closed boundary.
     pub edges: f64,
+    /// Connected components of the pixels inside the boundary.
+    pub regions: f64,
+    /// GPU only: from the submit to the labels on the CPU, less the stages' GPU time
+    /// (all of it where the adapter has no timestamps, the stages then reading 0).
+    pub readback: f64,
+    /// Region clean-up (splits, joins, growth) and outlines.
     pub contours: f64,
     pub ransac: f64,
     pub polygons: f64,
     pub total: f64,
 }
 
-/// Every intermediate image, for debug pictures and the twin comparisons.
+/// What a frame went through, for the map, debug pictures and the twin comparisons.
 #[derive(Clone, Debug)]
 pub struct Stages {
     pub depth: Grid<f32>,
-    pub smoothed: Grid<f32>,
-    pub normals: Grid<[f32; 3]>,
-    pub canny: Grid<u8>,
-    /// Closed edge lines (Canny + depth steps) plus no-normal pixels: 1 = not inside any region.
-    pub boundary: Grid<u8>,
+    /// The per-pixel stages' images: always from the CPU twin; from the GPU only when
+    /// asked for (`Extractor::keep_images`), as they would be most of its readback.
+    pub images: Option<Images>,
     pub labels: Grid<u32>,
     pub regions: Vec<Region>,
     pub fits: Vec<Option<PlaneFit>>,
+}
+
+/// The images of the per-pixel stages.
+#[derive(Clone, Debug)]
+pub struct Images {
+    pub smoothed: Grid<f32>,
+    pub normals: Grid<[f32; 3]>,
+    /// Canny edges after hysteresis.
+    pub canny: Grid<u8>,
+    /// Closed edge lines (Canny + depth steps) plus no-normal pixels: 1 = not inside any region.
+    pub boundary: Grid<u8>,
 }
 
 /// Smallest region worth a plane fit, pixels (the area test comes after the fit).
@@ -103,6 +122,8 @@ pub struct Extractor {
     /// With `auto` on a software adapter: the first frame times both twins and keeps the faster.
     race_first_frame: bool,
     pub cfg: PipelineConfig,
+    /// Whether the GPU reads the intermediate images back (for debug pictures).
+    pub keep_images: bool,
 }
 
 impl Extractor {
@@ -128,7 +149,7 @@ impl Extractor {
                 }
             },
         };
-        Ok(Extractor { engine, race_first_frame, cfg: cfg.clone() })
+        Ok(Extractor { engine, race_first_frame, cfg: cfg.clone(), keep_images: false })
     }
 
     /// "gpu" or "cpu".
@@ -156,12 +177,13 @@ impl Extractor {
         frame: &DepthFrame,
         intr: &Intrinsics,
     ) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
+        let keep = self.keep_images;
         if std::mem::take(&mut self.race_first_frame)
             && let Engine::Gpu(gpu) = &mut self.engine
         {
             // The first GPU run compiles and allocates: time the second.
-            extract_gpu(gpu, frame, intr, &self.cfg)?;
-            let gpu_ms = extract_gpu(gpu, frame, intr, &self.cfg)?.2.total;
+            extract_with(Twin::Gpu(gpu), frame, intr, &self.cfg, keep)?;
+            let gpu_ms = extract_with(Twin::Gpu(gpu), frame, intr, &self.cfg, keep)?.2.total;
             let cpu = extract_cpu(frame, intr, &self.cfg)?;
             let name = gpu.describe();
             if cpu.2.total < gpu_ms {
@@ -177,10 +199,11 @@ impl Extractor {
                 cpu.2.total
             );
         }
-        match &mut self.engine {
-            Engine::Cpu => extract_cpu(frame, intr, &self.cfg),
-            Engine::Gpu(gpu) => extract_gpu(gpu, frame, intr, &self.cfg),
-        }
+        let twin = match &mut self.engine {
+            Engine::Cpu => Twin::Cpu,
+            Engine::Gpu(gpu) => Twin::Gpu(gpu),
+        };
+        extract_with(twin, frame, intr, &self.cfg, keep)
     }
 }
 
@@ -195,98 +218,92 @@ pub(crate) fn stopwatch() -> impl FnMut() -> f64 {
     }
 }
 
-/// Extracts a frame's polygons on the CPU, keeping every stage's image.
+/// Which twin runs a frame's stages.
+pub enum Twin<'a> {
+    Cpu,
+    Gpu(&'a mut gpu::Gpu),
+}
+
+/// Extracts a frame's polygons on the CPU twin, keeping every stage's image.
 pub fn extract_cpu(
     frame: &DepthFrame,
     intr: &Intrinsics,
     cfg: &PipelineConfig,
+) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
+    extract_with(Twin::Cpu, frame, intr, cfg, true)
+}
+
+/// Extracts a frame's polygons with the per-pixel stages and the RANSAC scoring on the
+/// GPU; `keep_images` reads the intermediate images back too.
+pub fn extract_gpu(
+    gpu: &mut gpu::Gpu,
+    frame: &DepthFrame,
+    intr: &Intrinsics,
+    cfg: &PipelineConfig,
+    keep_images: bool,
+) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
+    extract_with(Twin::Gpu(gpu), frame, intr, cfg, keep_images)
+}
+
+/// One frame, every stage, on either twin: the per-pixel stages up to the region labels
+/// (one submit on the GPU), then the plane fits (RANSAC scored by the twin), the region
+/// clean-up, outlines and polygons.
+pub fn extract_with(
+    twin: Twin,
+    frame: &DepthFrame,
+    intr: &Intrinsics,
+    cfg: &PipelineConfig,
+    keep_images: bool,
 ) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
     let mut times = StageTimes::default();
     let t0 = Instant::now();
     let mut lap = stopwatch();
     let depth = depth_metres(frame, intr)?;
     times.upload = lap();
-    let smoothed =
-        cpu::diffusion::diffuse(&depth, cfg.diffusion_time as f32, cfg.diffusion_steps, cfg.diffusion_kappa_m as f32);
-    times.diffusion = lap();
-    let normals = cpu::normals::normals(&smoothed, intr, cfg.normal_kernel);
-    times.normals = lap();
-    let grad = cpu::canny::normal_gradient(&normals);
-    let class = cpu::canny::classify(&grad, cfg.canny_low as f32, cfg.canny_high as f32);
-    let fit = |batch: &PointBatch| {
-        Ok(cpu::ransac::fit_planes(batch, cfg.ransac_hypotheses, cfg.ransac_inlier_distance_m as f32))
+    let (images, seg, gpu) = match twin {
+        Twin::Cpu => {
+            let images = cpu::image_stages(&depth, intr, cfg, &mut times, &mut lap);
+            let seg = Segmentation::components(&images.boundary, MIN_REGION_PIXELS);
+            times.regions = lap();
+            (Some(images), seg, None)
+        }
+        Twin::Gpu(gpu) => {
+            let out = gpu.image_stages(&depth, intr, cfg, keep_images)?;
+            let mut labels = out.regions;
+            let count = cpu::components::dense_from_roots(&mut labels.data);
+            let seg = Segmentation::from_labels(labels, count, MIN_REGION_PIXELS);
+            // Since the depth: the upload, the submit, the readback and the numbering.
+            let ms = lap();
+            let t = out.times;
+            [times.diffusion, times.normals, times.edges, times.regions] = [t.diffusion, t.normals, t.edges, t.regions];
+            times.upload += t.upload;
+            times.readback = (ms - t.upload - t.diffusion - t.normals - t.edges - t.regions).max(0.0);
+            (out.images, seg, Some(&*gpu))
+        }
     };
-    let (polygons, stages) = finish(depth, smoothed, normals, &class, intr, cfg, fit, &mut times, &mut lap)?;
-    times.total = t0.elapsed().as_secs_f64() * 1e3;
-    Ok((FramePolygons { stamp_ns: frame.stamp_ns, polygons }, stages, times))
-}
-
-/// Extracts a frame's polygons with the image stages and the RANSAC scoring on the GPU.
-pub fn extract_gpu(
-    gpu: &mut gpu::Gpu,
-    frame: &DepthFrame,
-    intr: &Intrinsics,
-    cfg: &PipelineConfig,
-) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
-    let mut times = StageTimes::default();
-    let t0 = Instant::now();
-    let depth = depth_metres(frame, intr)?;
-    let out = gpu.image_stages(&depth, intr, cfg)?;
-    [times.upload, times.diffusion, times.normals, times.edges] = out.times;
-    times.upload += t0.elapsed().as_secs_f64() * 1e3 - out.times.iter().sum::<f64>();
-    let mut lap = stopwatch();
     let (hyp, dist) = (cfg.ransac_hypotheses, cfg.ransac_inlier_distance_m as f32);
-    let gpu = &*gpu;
-    let fit = |batch: &PointBatch| {
-        let scores = gpu.score_hypotheses(batch, hyp, dist)?;
-        Ok(cpu::ransac::fits_from_scores(batch, &scores, hyp, dist))
+    let fit = |batch: &PointBatch| match gpu {
+        None => Ok(cpu::ransac::fit_planes(batch, hyp, dist)),
+        Some(gpu) => Ok(cpu::ransac::fits_from_scores(batch, &gpu.score_hypotheses(batch, hyp, dist)?, hyp, dist)),
     };
-    let (polygons, stages) =
-        finish(depth, out.smoothed, out.normals, &out.class, intr, cfg, fit, &mut times, &mut lap)?;
-    times.total = t0.elapsed().as_secs_f64() * 1e3;
-    Ok((FramePolygons { stamp_ns: frame.stamp_ns, polygons }, stages, times))
-}
-
-/// The stages after the per-pixel ones, shared by both backends: hysteresis, depth
-/// steps and closing, regions, plane fits (`fit` is the backend's), polygons.
-#[allow(clippy::too_many_arguments)]
-fn finish(
-    depth: Grid<f32>,
-    smoothed: Grid<f32>,
-    normals: Grid<[f32; 3]>,
-    class: &Grid<u8>,
-    intr: &Intrinsics,
-    cfg: &PipelineConfig,
-    fit: impl FnMut(&PointBatch) -> Result<Vec<Option<PlaneFit>>, ExtractError>,
-    times: &mut StageTimes,
-    lap: &mut impl FnMut() -> f64,
-) -> Result<(Vec<Polygon>, Stages), ExtractError> {
-    let canny = cpu::canny::hysteresis(class);
-    let boundary = cpu::canny::boundary(
-        &canny,
-        &smoothed,
-        cfg.depth_edge_ratio as f32,
-        &normals,
-        cfg.closing_kernel_px,
-        cfg.normal_kernel,
-    );
-    times.edges += lap();
     let cloud = Cloud::new(&depth, intr);
-    let (seg, regions, fits) = segment_and_fit(&cloud, &boundary, cfg, fit, times, lap)?;
+    let (seg, regions, fits) = segment_and_fit(seg, &cloud, cfg, fit, &mut times, &mut lap)?;
     let polygons = build_polygons(&regions, &fits, &seg, &depth, &cloud, intr, cfg);
     times.polygons = lap();
-    Ok((polygons, Stages { depth, smoothed, normals, canny, boundary, labels: seg.labels, regions, fits }))
+    times.total = t0.elapsed().as_secs_f64() * 1e3;
+    let stages = Stages { depth, images, labels: seg.labels, regions, fits };
+    Ok((FramePolygons { stamp_ns: frame.stamp_ns, polygons }, stages, times))
 }
 
 /// What segmentation hands on: the regions, their pixels, and each one's plane if it has one.
 pub type Segmented = (Segmentation, Vec<Region>, Vec<Option<PlaneFit>>);
 
-/// Regions from the boundary map, their planes (`fit` is the batched RANSAC + refit of
-/// the backend), leaks split and fitted again, regions grown back to their true
-/// borders, outlines traced. Times the RANSAC calls as `ransac`, the rest as `contours`.
+/// The regions' planes (`fit` is the batched RANSAC + refit of the twin), leaks split
+/// and fitted again, coplanar pieces joined, regions grown back to their true borders,
+/// outlines traced. Times the RANSAC calls as `ransac`, the rest as `contours`.
 pub fn segment_and_fit(
+    mut seg: Segmentation,
     cloud: &Cloud,
-    boundary: &Grid<u8>,
     cfg: &PipelineConfig,
     mut fit: impl FnMut(&PointBatch) -> Result<Vec<Option<PlaneFit>>, ExtractError>,
     times: &mut StageTimes,
@@ -294,7 +311,6 @@ pub fn segment_and_fit(
 ) -> Result<Segmented, ExtractError> {
     let dist = cfg.ransac_inlier_distance_m as f32;
     let min_ratio = cfg.ransac_min_inlier_ratio;
-    let mut seg = Segmentation::components(boundary, MIN_REGION_PIXELS);
     let all: Vec<usize> = (0..seg.pixels.len()).collect();
     let batch = seg.points(&all, cloud);
     times.contours = lap();

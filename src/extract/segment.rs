@@ -31,12 +31,20 @@ impl Segmentation {
     /// 8-connected components of the pixels where `boundary` is 0, those with at least
     /// `min_pixels` pixels becoming regions in scan order.
     pub fn components(boundary: &Grid<u8>, min_pixels: usize) -> Segmentation {
-        let (w, h) = (boundary.width, boundary.height);
         let free: Vec<bool> = boundary.data.iter().map(|&b| b == 0).collect();
-        let (mut labels, count) = label_components(&free, w, h);
+        let (labels, count) = label_components(&free, boundary.width, boundary.height);
+        Segmentation::from_labels(
+            Grid { width: boundary.width, height: boundary.height, data: labels },
+            count,
+            min_pixels,
+        )
+    }
+
+    /// Regions from component labels (1..=count, 0 outside any, numbered in scan order):
+    /// those with at least `min_pixels` pixels, renumbered in the same order.
+    pub fn from_labels(mut labels: Grid<u32>, count: usize, min_pixels: usize) -> Segmentation {
         let mut sizes = vec![0usize; count + 1];
-        labels.iter().for_each(|&l| sizes[l as usize] += 1);
-        // Components big enough become regions, renumbered in the same (scan) order.
+        labels.data.iter().for_each(|&l| sizes[l as usize] += 1);
         let mut region_of = vec![0u32; count + 1];
         let mut pixels: Vec<Vec<u32>> = Vec::new();
         for l in 1..=count {
@@ -45,13 +53,13 @@ impl Segmentation {
                 region_of[l] = pixels.len() as u32;
             }
         }
-        for (i, l) in labels.iter_mut().enumerate() {
+        for (i, l) in labels.data.iter_mut().enumerate() {
             *l = region_of[*l as usize];
             if *l != 0 {
                 pixels[*l as usize - 1].push(i as u32);
             }
         }
-        Segmentation { labels: Grid { width: w, height: h, data: labels }, pixels }
+        Segmentation { labels, pixels }
     }
 
     /// Adds a region of these pixels (sorted here), returning its index.

@@ -2,15 +2,15 @@
 //!
 //! Canny on a vector image: the gradient of the unit-normal field (3x3 Sobel per
 //! channel, in change of normal per pixel), its magnitude and Di Zenzo direction,
-//! non-maximum suppression along that direction, and hysteresis between the two
-//! thresholds. Depth discontinuities and pixels without a normal are edges too, and a
-//! morphological close joins broken edges. Directions are chosen by comparisons, not
-//! angles, so both twins pick the same neighbours.
+//! non-maximum suppression along that direction, then hysteresis between the two
+//! thresholds (`components`). Directions are chosen by comparisons, not angles, so both
+//! twins pick the same neighbours.
 
 use rayon::prelude::*;
 
+use super::components::hysteresis;
 use super::{ROWS_PER_TASK, widest_simd};
-use crate::grid::{Grid, label_components};
+use crate::grid::Grid;
 
 /// Gradient of the normal field: (magnitude, NMS sector 0..4) per pixel; sector 4 marks
 /// a pixel whose 3x3 neighbourhood lacks a normal, or on the image's border (magnitude 0
@@ -163,18 +163,6 @@ pub fn classify(grad: &Grid<(f32, u8)>, low: f32, high: f32) -> Grid<u8> {
     Grid { width: w, height: grad.height, data: class }
 }
 
-/// Hysteresis: 1 for strong pixels and the weak ones 8-connected to them through weak pixels.
-pub fn hysteresis(class: &Grid<u8>) -> Grid<u8> {
-    let (w, h) = (class.width, class.height);
-    let candidate: Vec<bool> = class.data.iter().map(|&c| c != 0).collect();
-    let (labels, count) = label_components(&candidate, w, h);
-    let mut strong = vec![false; count + 1];
-    for (&l, &c) in labels.iter().zip(&class.data) {
-        strong[l as usize] |= c == 2;
-    }
-    Grid { width: w, height: h, data: labels.iter().map(|&l| u8::from(l != 0 && strong[l as usize])).collect() }
-}
-
 /// 0, 1 (weak) or 2 (strong) for pixel (u, v) after non-maximum suppression.
 #[inline]
 pub fn suppressed_class(grad: &Grid<(f32, u8)>, u: usize, v: usize, low: f32, high: f32) -> u8 {
@@ -194,205 +182,10 @@ pub fn suppressed_class(grad: &Grid<(f32, u8)>, u: usize, v: usize, low: f32, hi
     if m > at(-1) && m >= at(1) { if m >= high { 2 } else { 1 } } else { 0 }
 }
 
-/// 1 where the pixel cannot be inside a planar region: the closed edge lines (Canny,
-/// and depth steps to a 4-neighbour larger than `ratio` times the depth), or no normal.
-/// The lines are closed with the `closing` square. Pixels without a normal are closed
-/// together with the lines only with the small `seal` square: a sensor dropout spoils
-/// a kernel-sized square of normals and breaks the Canny line through it, leaving
-/// narrow channels between the square and the line's ends that regions would leak
-/// through; closing them with the big square would grow clusters of dropouts into
-/// blobs that eat the surfaces around them.
-pub fn boundary(
-    canny: &Grid<u8>,
-    depth: &Grid<f32>,
-    ratio: f32,
-    normals: &Grid<[f32; 3]>,
-    closing: u32,
-    seal: u32,
-) -> Grid<u8> {
-    let (w, h) = (depth.width, depth.height);
-    let mut lines = vec![0u8; w * h];
-    lines.par_chunks_mut(w).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, out)| {
-        let row = |v: usize| &depth.data[v * w..(v + 1) * w];
-        let (above, below) = ((v > 0).then(|| row(v - 1)), (v + 1 < h).then(|| row(v + 1)));
-        depth_steps(row(v), above.unwrap_or(&[]), below.unwrap_or(&[]), out, ratio);
-        out.iter_mut().zip(&canny.data[v * w..(v + 1) * w]).for_each(|(o, &c)| *o |= u8::from(c != 0));
-    });
-    let closed = close(&Grid { width: w, height: h, data: lines }, closing);
-    let with_holes = Grid {
-        width: w,
-        height: h,
-        data: closed.data.iter().zip(&normals.data).map(|(&l, n)| (l != 0 || *n == [0.0; 3]) as u8).collect(),
-    };
-    let sealed = close(&with_holes, seal);
-    // Regions are 8-connected (as contour tracing sees them), so a thin diagonal line
-    // would leak: growing each line pixel into its 4-neighbours (a plus-shaped dilation,
-    // in whole rows) seals it.
-    let mut out = vec![0u8; w * h];
-    out.par_chunks_mut(w).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, row)| {
-        let line = |v: usize| &closed.data[v * w..(v + 1) * w];
-        row.copy_from_slice(line(v));
-        for (o, &left) in row[1..].iter_mut().zip(line(v)) {
-            *o |= left;
-        }
-        for (o, &right) in row.iter_mut().zip(&line(v)[1..]) {
-            *o |= right;
-        }
-        for j in [v.wrapping_sub(1), v + 1] {
-            if j < h {
-                row.iter_mut().zip(line(j)).for_each(|(o, &l)| *o |= l);
-            }
-        }
-        row.iter_mut().zip(&sealed.data[v * w..(v + 1) * w]).for_each(|(o, &s)| *o |= s);
-    });
-    Grid { width: w, height: h, data: out }
-}
-
-/// 1 in `out` where the depth steps to a 4-neighbour by more than `ratio` times the depth
-/// (both valid); `above` and `below` are the neighbouring rows, empty beyond the image.
-/// Whole-row comparisons, so the loops vectorise.
-fn depth_steps(row: &[f32], above: &[f32], below: &[f32], out: &mut [u8], ratio: f32) {
-    let jump = |z: f32, q: f32| u8::from(z != 0.0 && q != 0.0 && (q - z).abs() > ratio * z);
-    out.fill(0);
-    // Right neighbours (zip stops at the row's end), then left ones; rows are never empty.
-    for (o, (&z, &q)) in out.iter_mut().zip(row.iter().zip(&row[1..])) {
-        *o |= jump(z, q);
-    }
-    for (o, (&z, &q)) in out[1..].iter_mut().zip(row[1..].iter().zip(row)) {
-        *o |= jump(z, q);
-    }
-    for other in [above, below] {
-        for (o, (&z, &q)) in out.iter_mut().zip(row.iter().zip(other)) {
-            *o |= jump(z, q);
-        }
-    }
-}
-
-/// Morphological close (dilate, then erode) with a `size` x `size` square; outside the
-/// image counts as edge, so closing never eats into the border.
-pub fn close(edges: &Grid<u8>, size: u32) -> Grid<u8> {
-    let r = (size / 2) as usize;
-    let dilated = dilate(edges, r, 1);
-    let inverted =
-        Grid { width: dilated.width, height: dilated.height, data: dilated.data.iter().map(|&e| 1 - e).collect() };
-    let eroded_inv = dilate(&inverted, r, 0);
-    Grid { width: edges.width, height: edges.height, data: eroded_inv.data.iter().map(|&e| 1 - e).collect() }
-}
-
-/// Binary dilation by a (2r+1)^2 square, separable: each row is the OR of its 2r + 1
-/// shifted copies, then each row the OR of the 2r + 1 rows around it (whole rows at
-/// a time, so both passes vectorise). `outside` is the value of pixels beyond the border.
-pub fn dilate(mask: &Grid<u8>, r: usize, outside: u8) -> Grid<u8> {
-    let (w, h) = (mask.width, mask.height);
-    let mut rows = vec![0u8; w * h];
-    rows.par_chunks_mut(w).zip(mask.data.par_chunks(w)).with_min_len(16).for_each(|(out, src)| {
-        let mut padded = vec![outside; w + 2 * r];
-        padded[r..r + w].copy_from_slice(src);
-        for k in 0..=2 * r {
-            out.iter_mut().zip(&padded[k..k + w]).for_each(|(o, &p)| *o |= p);
-        }
-    });
-    let mut data = vec![0u8; w * h];
-    data.par_chunks_mut(w).enumerate().with_min_len(16).for_each(|(v, out)| {
-        if v < r || v + r >= h {
-            out.fill(outside);
-        }
-        for j in v.saturating_sub(r)..(v + r + 1).min(h) {
-            out.iter_mut().zip(&rows[j * w..(j + 1) * w]).for_each(|(o, &p)| *o |= p);
-        }
-    });
-    Grid { width: w, height: h, data }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::extract::cpu::{diffusion, normals};
-    use crate::synth::{NoiseModel, Scene, SceneKind, noisy_depth, path::trajectory, render};
-    use crate::types::Intrinsics;
-
-    /// Normals of a noisy stair frame with sensor dropouts, as the pipeline makes them.
-    fn stair_normals() -> Grid<[f32; 3]> {
-        let scene = Scene::build(SceneKind::Straight);
-        let pose = trajectory(&scene, 30)[12];
-        let intr = Intrinsics::L515_320X240;
-        let pixels = noisy_depth(&render(&scene, &intr, &pose), &NoiseModel::l515(2.0), 7, 0);
-        let (w, h) = (intr.width as usize, intr.height as usize);
-        let mut depth = Grid { width: w, height: h, data: pixels.iter().map(|&d| d as f32 * 0.00025).collect() };
-        // Dropouts of every size the gradient's validity test must see.
-        for (k, z) in depth.data.iter_mut().enumerate() {
-            if k % 997 == 0 || (k / w) % 61 == 3 && (k % w) % 43 < 5 {
-                *z = 0.0;
-            }
-        }
-        let smoothed = diffusion::diffuse(&depth, 4.0, 1, 0.0335);
-        normals::normals(&smoothed, &intr, 5)
-    }
-
-    /// `boundary` by its definition, pixel by pixel: depth steps to a 4-neighbour, the close
-    /// as a min of maxes over squares (outside counting as edge), the 4-neighbour growth.
-    fn boundary_by_definition(canny: &Grid<u8>, depth: &Grid<f32>, ratio: f32, normals: &Grid<[f32; 3]>) -> Vec<u8> {
-        let (w, h) = (depth.width as isize, depth.height as isize);
-        let at = |g: &[u8], u: isize, v: isize, outside: u8| {
-            if u < 0 || v < 0 || u >= w || v >= h { outside } else { g[(v * w + u) as usize] }
-        };
-        let n4 = [(1, 0), (-1, 0), (0, 1), (0, -1)];
-        let mut lines = vec![0u8; (w * h) as usize];
-        for v in 0..h {
-            for u in 0..w {
-                let z = depth.data[(v * w + u) as usize];
-                let step = n4.iter().any(|&(du, dv)| {
-                    let (x, y) = (u + du, v + dv);
-                    x >= 0 && y >= 0 && x < w && y < h && {
-                        let q = depth.data[(y * w + x) as usize];
-                        z != 0.0 && q != 0.0 && (q - z).abs() > ratio * z
-                    }
-                });
-                lines[(v * w + u) as usize] = u8::from(canny.data[(v * w + u) as usize] != 0 || step);
-            }
-        }
-        let close = |g: &[u8], size: isize| -> Vec<u8> {
-            let r = size / 2;
-            let square = |g: &[u8], u: isize, v: isize, f: fn(u8, u8) -> u8, start: u8, outside: u8| {
-                (-r..=r)
-                    .flat_map(|dv| (-r..=r).map(move |du| (du, dv)))
-                    .fold(start, |m, (du, dv)| f(m, at(g, u + du, v + dv, outside)))
-            };
-            let dilated: Vec<u8> = (0..w * h).map(|i| square(g, i % w, i / w, u8::max, 0, 1)).collect();
-            (0..w * h).map(|i| square(&dilated, i % w, i / w, u8::min, 1, 1)).collect()
-        };
-        let closed = close(&lines, 7);
-        let with_holes: Vec<u8> =
-            closed.iter().zip(&normals.data).map(|(&l, n)| u8::from(l != 0 || *n == [0.0; 3])).collect();
-        let sealed = close(&with_holes, 5);
-        (0..w * h)
-            .map(|i| {
-                let (u, v) = (i % w, i / w);
-                let line = closed[i as usize] != 0 || n4.iter().any(|&(du, dv)| at(&closed, u + du, v + dv, 0) != 0);
-                u8::from(line || sealed[i as usize] != 0)
-            })
-            .collect()
-    }
-
-    #[test]
-    fn fast_boundary_is_its_definition() {
-        let n = stair_normals();
-        let (w, h) = (n.width, n.height);
-        // Depth with steps and holes, Canny lines from the gradient of these normals.
-        let depth = Grid {
-            width: w,
-            height: h,
-            data: (0..w * h)
-                .map(|i| if n.data[i] == [0.0; 3] && i % 3 == 0 { 0.0 } else { 1.0 + 0.3 * ((i % w) / 40) as f32 })
-                .collect(),
-        };
-        let canny = canny(&normal_gradient(&n), 0.05, 0.1);
-        let fast = boundary(&canny, &depth, 0.03, &n, 7, 5);
-        let want = boundary_by_definition(&canny, &depth, 0.03, &n);
-        assert_eq!(fast.data, want);
-        let ones = want.iter().filter(|&&b| b != 0).count();
-        assert!(ones > w * h / 20 && ones < w * h * 9 / 10, "a boundary worth comparing: {ones} of {} px", w * h);
-    }
+    use crate::extract::cpu::test_frames::stair_normals;
 
     #[test]
     fn fast_gradient_is_the_oracle_bit_for_bit() {
