@@ -124,6 +124,7 @@ fn small_map() -> MapSnapshot {
             insets: vec![crate::map::Region { boundary: ring, holes: vec![] }],
             observations: 2,
             step: Some(id as u32),
+            plane_covariance: [0.0; 16],
         }
     };
     MapSnapshot {

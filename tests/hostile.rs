@@ -176,6 +176,7 @@ fn snapshot_with(boundary: Vec<[f64; 3]>) -> MapSnapshot {
             insets: vec![],
             observations: 3,
             step: Some(1),
+            plane_covariance: [0.0; 16],
         }],
     }
 }

@@ -4,6 +4,7 @@
 use geo::{Area, BooleanOps, Coord, LineString, Polygon as Shape};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use polymap::config::MapConfig;
+use polymap::extract::uncertainty::PlaneUncertainty;
 use polymap::extract::{Grid, Polygon, VertexKind};
 use polymap::map::convex::convex_pieces;
 use polymap::map::drift::DriftFilter;
@@ -308,6 +309,67 @@ fn plane_is_refit_from_all_observations() {
     let p = &map.snapshot().polygons[0];
     assert!((p.offset + 0.12).abs() < 1e-9, "plane height {} is the mean 0.12", -p.offset);
     assert!((p.normal[2] - 1.0).abs() < 1e-12);
+}
+
+/// Variance of the distance to a plane at point `x`, from its coefficient covariance.
+fn distance_variance(c: &[f64; 16], x: [f64; 3]) -> f64 {
+    let v = [x[0], x[1], x[2], 1.0];
+    (0..4).map(|r| (0..4).map(|k| v[r] * c[4 * r + k] * v[k]).sum::<f64>()).sum()
+}
+
+#[test]
+fn the_map_s_plane_covariance_is_its_observations_fused_and_shrinks_as_they_come_in() {
+    let (pose, intr) = camera();
+    let mut map = PolygonMap::new(&MapConfig::default());
+    // A tread seen by its extractor with 1 mm of offset sigma and 0.2 deg of tilt sigma
+    // (about its own centre, with axes of its own): as a frame polygon carries it.
+    let world_uncertainty = PlaneUncertainty {
+        centre: [0.4, 0.1, 0.2],
+        axes: [[0.6, 0.8, 0.0], [-0.8, 0.6, 0.0]],
+        cov: [[1.2e-5, 2e-6, 1e-7], [2e-6, 1.0e-5, -2e-7], [1e-7, -2e-7, 1e-6]],
+    };
+    let mut tread = seen(&rect(0.0, -0.5, 0.8, 0.5), 0.2, &pose);
+    tread.uncertainty = world_uncertainty.moved(
+        |v| (pose.inverse().rotation * Vector3::from(v)).into(),
+        |v| (pose.inverse() * Point3::from(v)).coords.into(),
+    );
+    let mut variances = Vec::new();
+    for k in 1..=8 {
+        map.update(std::slice::from_ref(&tread), &pose, &intr, None);
+        let snap = map.snapshot();
+        assert_eq!(snap.polygons.len(), 1);
+        let p = &snap.polygons[0];
+        assert_eq!(p.observations, k);
+        let c = p.plane_covariance;
+        // Symmetric, and a proper covariance along the plane's own directions.
+        for r in 0..4 {
+            for q in 0..4 {
+                assert!((c[4 * r + q] - c[4 * q + r]).abs() <= 1e-15, "symmetric: {c:?}");
+            }
+        }
+        variances.push(distance_variance(&c, p.centroid));
+    }
+    // One observation: the extractor's own variance, moved to the map polygon's centroid.
+    let centroid = map.snapshot().polygons[0].centroid;
+    let d = Vector3::from(centroid) - Vector3::from(world_uncertainty.centre);
+    let (a, b) = (d.dot(&Vector3::from(world_uncertainty.axes[0])), d.dot(&Vector3::from(world_uncertainty.axes[1])));
+    let g = [-a, -b, 1.0];
+    let cov = world_uncertainty.cov;
+    let want = (0..3).map(|r| (0..3).map(|q| g[r] * cov[r][q] * g[q]).sum::<f64>()).sum::<f64>();
+    assert!((variances[0] - want).abs() <= 1e-9 * want, "first observation: {} against {want}", variances[0]);
+    // Equal independent observations: information adds, the variance falls as 1 / k.
+    for (k, v) in variances.iter().enumerate() {
+        let expected = variances[0] / (k + 1) as f64;
+        assert!((v - expected).abs() <= 1e-6 * expected, "after {} observations: {v} against {expected}", k + 1);
+    }
+    // A polygon that says nothing of its plane adds nothing.
+    let mut unknown = tread.clone();
+    unknown.uncertainty = PlaneUncertainty::default();
+    map.update(&[unknown], &pose, &intr, None);
+    let p = &map.snapshot().polygons[0];
+    assert_eq!(p.observations, 9);
+    let v = distance_variance(&p.plane_covariance, p.centroid);
+    assert!((v - variances[7]).abs() <= 1e-6 * v, "an unknown covariance changed the fused one: {v}");
 }
 
 #[test]

@@ -155,16 +155,16 @@ fn polymap_msgs_hashes_stay_what_they_are() {
     // messages no longer match. Update polymap_msgs/ with it (the Python peer in
     // tests/ros2_peer.rs recomputes these from the .msg and .srv files).
     let pinned = [
-        (message_hash::<msg::Polygon>(), "RIHS01_bf3b58e36276f91802eb75b844641f2ac19cbf861cb21d4ae18d98db4c84b2e0"),
+        (message_hash::<msg::Polygon>(), "RIHS01_df36e36d56412d7a6a477b8e9030ee7498a15b6dab366d57c763daf03cd65951"),
         (
             message_hash::<msg::FramePolygons>(),
-            "RIHS01_88c4bc9fccf9e9e95263381890e3fac4aefbe3a811c6065f5c796891ead15222",
+            "RIHS01_4ffe8a9ffffc4d7f5b91780ae247afe2192da5c52134f5c05cc14ba0191cddf6",
         ),
-        (message_hash::<msg::MapUpdate>(), "RIHS01_5180482b3d1b22c764781e3a6dff0b2369056c9d513047fcf7e6ad4f73e73dca"),
-        (message_hash::<msg::Map>(), "RIHS01_8501f342fed76f738dd6d9e4a74d841400e0fe4edbf8f62772aeea3de94b1c56"),
+        (message_hash::<msg::MapUpdate>(), "RIHS01_18d08c93b6eabd991b803d88f0a2ec613f083e7ca8012d7cc545d692bb1d4c8f"),
+        (message_hash::<msg::Map>(), "RIHS01_3acdd9c4a5d2941788b62de48504706dccf141fc05616d722cc642dd625667df"),
         (message_hash::<msg::Foothold>(), "RIHS01_d26115d96a054f501d9035484e44efd87a0dabf66fd8dc041d707ec4e59b8d6a"),
         (message_hash::<msg::Status>(), "RIHS01_60bd89eec0cc25e5fd6f0095ab83e8ed4b63c59a62a5a806ea4970c9aa32b5db"),
-        (service_hash::<msg::GetMap>(), "RIHS01_046849d6b99467e8f154b19250d5d4ea699ca8172c0450d1070b84a4f9da5697"),
+        (service_hash::<msg::GetMap>(), "RIHS01_a71f5084f76aff119474b636e68d8598fd56d7844b6ec6c47cc7b8585a5d3f0e"),
         (service_hash::<msg::GetFoothold>(), "RIHS01_160e108c4c57519c6ee265867964cd138069183f4f278b046e095327834391b8"),
         (message_hash::<msg::Region>(), "RIHS01_02f36fb3a034933b83025e74605cb9f8bd8c509fa461641830b6258de7406ae7"),
     ];

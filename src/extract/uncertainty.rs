@@ -52,6 +52,69 @@ impl PlaneUncertainty {
         )
     }
 
+    /// Whether it says anything: a covariance with positive variances (a default, all
+    /// zero, is "unknown", not "exact").
+    pub fn is_known(&self) -> bool {
+        (0..3).all(|k| self.cov[k][k] > 0.0 && self.cov[k][k].is_finite())
+    }
+
+    /// The same errors about another centre and pair of in-plane axes of (nearly) the same
+    /// plane: the tilts projected onto the new axes, and the shift at the new centre, which
+    /// the tilts move by their lever arm.
+    pub fn expressed_at(&self, centre: [f64; 3], axes: [[f64; 3]; 2]) -> PlaneUncertainty {
+        let (e, f) = (self.axes.map(Vector3::from), axes.map(Vector3::from));
+        let d = Vector3::from(centre) - Vector3::from(self.centre);
+        #[rustfmt::skip]
+        let j = Matrix3::new(
+            e[0].dot(&f[0]), e[1].dot(&f[0]), 0.0,
+            e[0].dot(&f[1]), e[1].dot(&f[1]), 0.0,
+            -e[0].dot(&d), -e[1].dot(&d), 1.0,
+        );
+        let cov = j * Matrix3::from(self.cov).transpose() * j.transpose();
+        PlaneUncertainty { centre, axes, cov: cov.transpose().into() }
+    }
+
+    /// The uncertainty of both estimates combined, as independent measurements of one
+    /// plane (information added), about this one's centre and axes. An unknown side adds
+    /// nothing.
+    pub fn fused_with(&self, other: &PlaneUncertainty) -> PlaneUncertainty {
+        if !other.is_known() {
+            return *self;
+        }
+        let theirs = other.expressed_at(self.centre, self.axes);
+        if !self.is_known() {
+            return theirs;
+        }
+        let inverse = |c: [[f64; 3]; 3]| Matrix3::from(c).try_inverse();
+        match (inverse(self.cov), inverse(theirs.cov)) {
+            (Some(a), Some(b)) => match (a + b).try_inverse() {
+                // Symmetric by construction: average away rounding.
+                Some(c) => PlaneUncertainty { cov: ((c + c.transpose()) / 2.0).into(), ..*self },
+                None => *self,
+            },
+            _ => *self,
+        }
+    }
+
+    /// The covariance of the plane's 4 coefficients (normal x, y, z, offset) of
+    /// `normal . p + offset = 0`, row-major: what planners get. A point x's distance to the
+    /// plane then has variance [x 1] C [x 1]^T.
+    pub fn coefficient_covariance(&self) -> [f64; 16] {
+        let (e1, e2) = (Vector3::from(self.axes[0]), Vector3::from(self.axes[1]));
+        let c = Vector3::from(self.centre);
+        // d(normal) = a1 e1 + a2 e2; d(offset) = -(a1 e1 + a2 e2) . c - shift.
+        let j =
+            nalgebra::Matrix4x3::new(e1.x, e2.x, 0.0, e1.y, e2.y, 0.0, e1.z, e2.z, 0.0, -e1.dot(&c), -e2.dot(&c), -1.0);
+        let cov = j * Matrix3::from(self.cov).transpose() * j.transpose();
+        let mut out = [0.0; 16];
+        for r in 0..4 {
+            for k in 0..4 {
+                out[4 * r + k] = cov[(r, k)];
+            }
+        }
+        out
+    }
+
     /// The same uncertainty seen in another frame (`rotate` then `translate`).
     pub fn moved(&self, rotate: impl Fn([f64; 3]) -> [f64; 3], translate: impl Fn([f64; 3]) -> [f64; 3]) -> Self {
         PlaneUncertainty { centre: translate(self.centre), axes: self.axes.map(rotate), cov: self.cov }

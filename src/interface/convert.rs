@@ -56,6 +56,7 @@ pub fn map_polygon(p: &MapPolygon) -> msg::Polygon {
         convex_pieces: p.convex_pieces.iter().map(|h| ring(h)).collect(),
         insets: p.insets.iter().map(region).collect(),
         observations: p.observations,
+        plane_covariance: p.plane_covariance,
     }
 }
 
@@ -88,6 +89,7 @@ pub fn map_polygon_of(p: &msg::Polygon) -> Option<MapPolygon> {
             .collect(),
         observations: p.observations,
         step: (p.step >= 0).then_some(p.step as u32),
+        plane_covariance: p.plane_covariance,
     })
 }
 
@@ -104,6 +106,7 @@ pub fn frame_polygon(p: &crate::extract::Polygon) -> msg::Polygon {
         boundary: p.boundary.iter().map(|&v| v.into()).collect(),
         holes: p.holes.iter().map(|h| ring(h)).collect(),
         observations: 1,
+        plane_covariance: if p.uncertainty.is_known() { p.uncertainty.coefficient_covariance() } else { [0.0; 16] },
         ..msg::Polygon::default()
     }
 }

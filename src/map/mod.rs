@@ -26,6 +26,7 @@ use rstar::{AABB, RTree};
 use serde::{Deserialize, Serialize};
 
 use crate::config::MapConfig;
+use crate::extract::uncertainty::PlaneUncertainty;
 use crate::extract::{Grid, Polygon, VertexKind};
 use crate::types::Intrinsics;
 use drift::DriftFilter;
@@ -56,6 +57,15 @@ pub struct MapPolygon {
     pub observations: u32,
     /// Step index for treads, landings and risers; 0 for the floor.
     pub step: Option<u32>,
+    /// Covariance of the plane's coefficients (normal x, y, z, offset), row-major: the
+    /// observations' plane covariances fused (extract::uncertainty). All zero when unknown
+    /// (a map read back from a snapshot, until it is seen again).
+    #[serde(default = "unknown_covariance")]
+    pub plane_covariance: [f64; 16],
+}
+
+fn unknown_covariance() -> [f64; 16] {
+    [0.0; 16]
 }
 
 impl MapPolygon {
@@ -121,6 +131,8 @@ struct Entry {
     shape: Shape<f64>,
     moments: Moments,
     plane: Plane,
+    /// Every observation's plane covariance fused, about the first one's centre and axes.
+    uncertainty: PlaneUncertainty,
     observations: u32,
     /// Frames in a row that contradicted it.
     misses: u32,
@@ -148,6 +160,7 @@ struct Observation {
     holes: Vec<Vec<[f64; 3]>>,
     plane: Plane,
     moments: Moments,
+    uncertainty: PlaneUncertainty,
     aabb: [[f64; 3]; 2],
     horizontal: bool,
     /// How far each vertex of its outline (then of each hole) is pulled in before what it
@@ -486,6 +499,7 @@ impl PolygonMap {
                     aabb: aabb(&w.boundary),
                     plane: Plane { normal, offset },
                     moments,
+                    uncertainty: w.uncertainty,
                     horizontal,
                     erode,
                     erode_holes,
@@ -542,6 +556,7 @@ impl PolygonMap {
             shape,
             moments: o.moments,
             plane: o.plane,
+            uncertainty: o.uncertainty,
             observations: 1,
             misses: 0,
             aabb: o.aabb,
@@ -579,6 +594,7 @@ impl PolygonMap {
             e.latest = looked_again(e.latest.take(), looked.as_ref(), as_seen, None, max_vertices);
             e.shape = shown(e.seen.as_ref(), e.latest.as_ref(), max_vertices).unwrap_or(e.shape.clone());
         }
+        e.uncertainty = e.uncertainty.fused_with(&o.uncertainty);
         refit(e, &o.moments, 1);
         self.file(id);
     }
@@ -595,6 +611,7 @@ impl PolygonMap {
         e.seen = union_into(e.seen.take(), theirs.clone(), max_vertices);
         e.confirmed = union_into(e.confirmed.take(), theirs, max_vertices);
         e.shape = shown(e.seen.as_ref(), e.latest.as_ref(), max_vertices).unwrap_or(e.shape.clone());
+        e.uncertainty = e.uncertainty.fused_with(&o.uncertainty);
         refit(e, &o.moments, o.observations);
         self.file(id);
     }
@@ -698,6 +715,9 @@ impl PolygonMap {
                 aabb: aabb(&p.boundary),
                 plane: Plane { normal, offset: p.offset },
                 moments,
+                // Snapshots keep the 4 x 4 coefficient covariance, not its parametrisation:
+                // unknown until the polygon is seen again.
+                uncertainty: PlaneUncertainty::default(),
                 horizontal: false,
                 erode: vec![0.0; p.boundary.len()],
                 erode_holes: p.holes.iter().map(|h| vec![0.0; h.len()]).collect(),
@@ -956,7 +976,21 @@ fn publish(id: u64, e: &Entry, (label, step): labels::Labelled, foot_margin: f64
         insets: inset_shapes.iter().map(region).collect(),
         observations: e.observations,
         step,
+        plane_covariance: plane_covariance(&e.uncertainty, &n, e.centroid),
     }
+}
+
+/// The fused plane covariance as planners get it: about the polygon's centroid, with axes
+/// in its current plane (the fit has moved since the first observation), as the
+/// covariance of the plane's coefficients; all zero when unknown.
+fn plane_covariance(u: &PlaneUncertainty, normal: &Vector3<f64>, centroid: [f64; 3]) -> [f64; 16] {
+    if !u.is_known() {
+        return unknown_covariance();
+    }
+    let e1 = Vector3::from(u.axes[0]);
+    let Some(f1) = (e1 - normal * e1.dot(normal)).try_normalize(1e-9) else { return unknown_covariance() };
+    let f2 = normal.cross(&f1);
+    u.expressed_at(centroid, [f1.into(), f2.into()]).coefficient_covariance()
 }
 
 fn aabb(points: &[[f64; 3]]) -> [[f64; 3]; 2] {

@@ -42,6 +42,8 @@ ros_message! {
         /// The polygon shrunk by the foot margin: every piece left, with its holes.
         pub insets: Vec<Region>,
         pub observations: u32,
+        /// Covariance of (normal x, y, z, offset), row-major; all zero when unknown.
+        pub plane_covariance: [f64; 16],
     }
 
     /// polymap_msgs/FramePolygons: one depth frame's polygons, as extracted.
