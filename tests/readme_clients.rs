@@ -57,6 +57,17 @@ fn command(line: &str) -> (Command, bool) {
     (c, background)
 }
 
+/// A child process killed however the test ends: a failed assert must not leave the demo
+/// listening on 7447, where the next run would find the port taken.
+struct Running(std::process::Child);
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 #[test]
 fn the_readme_s_clients_reach_a_running_demo_and_print_the_map() {
     assert!(
@@ -67,12 +78,12 @@ fn the_readme_s_clients_reach_a_running_demo_and_print_the_map() {
     assert_eq!(lines.len(), 3, "{lines:?}");
     let (mut demo_cmd, background) = command(&lines[0]);
     assert!(background && lines[0].contains(" demo"), "the demo runs in the background: {}", lines[0]);
-    let mut demo = demo_cmd.stdout(Stdio::piped()).stderr(Stdio::null()).spawn().unwrap();
+    let mut demo = Running(demo_cmd.stdout(Stdio::piped()).stderr(Stdio::null()).spawn().unwrap());
     // The demo says where clients connect.
     let mut said = String::new();
     {
         use std::io::BufRead;
-        let mut out = std::io::BufReader::new(demo.stdout.as_mut().unwrap());
+        let mut out = std::io::BufReader::new(demo.0.stdout.as_mut().unwrap());
         out.read_line(&mut said).unwrap();
     }
     assert!(said.contains("clients connect to tcp/127.0.0.1:7447"), "{said}");
@@ -85,8 +96,7 @@ fn the_readme_s_clients_reach_a_running_demo_and_print_the_map() {
         assert!(out.status.success(), "{line} failed:\n{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
         outputs.push(stdout);
     }
-    let _ = demo.kill();
-    let _ = demo.wait();
+    drop(demo);
 
     // The Python client: the map's polygons, a foothold on the second tread, RViz markers.
     let v: serde_json::Value = serde_json::from_str(outputs[0].trim()).unwrap();

@@ -643,13 +643,15 @@ impl Gpu {
         out
     }
 
-    /// Copies `outputs` one after another into the readback buffer (and the timestamps
-    /// after them, if resolved), submits, and hands the words read back to `read`.
+    /// Copies `outputs` one after another into the readback buffer (and, for a `timed`
+    /// submit on an adapter with timestamps, the stages' timestamps after them), submits,
+    /// and hands the words read back to `read`.
     fn submit_and_read<T>(
         &self,
         mut encoder: wgpu::CommandEncoder,
         scope: wgpu::ErrorScopeGuard,
         outputs: &[(&wgpu::Buffer, u64)],
+        timed: bool,
         read: impl FnOnce(&[u32], Option<&[u64]>) -> T,
     ) -> Result<T, GpuError> {
         let f = self.frame.as_ref().expect("frame_for before");
@@ -658,7 +660,7 @@ impl Gpu {
             encoder.copy_buffer_to_buffer(buffer, 0, &f.readback, at, *bytes);
             at += bytes;
         }
-        let stamped = f.timestamps.as_ref().map(|(set, resolved)| {
+        let stamped = f.timestamps.as_ref().filter(|_| timed).map(|(set, resolved)| {
             encoder.resolve_query_set(set, 0..2 * TIMED_STAGES, resolved, 0);
             encoder.copy_buffer_to_buffer(resolved, 0, &f.readback, at, TIMESTAMP_BYTES);
         });
@@ -724,7 +726,7 @@ impl Gpu {
         }
         let period_ms = self.queue.get_timestamp_period() as f64 * 1e-6;
         let mut times = GpuTimes { upload, ..Default::default() };
-        let (regions, images) = self.submit_and_read(encoder, scope, &outputs, |words, stamps| {
+        let (regions, images) = self.submit_and_read(encoder, scope, &outputs, true, |words, stamps| {
             times.submit = lap();
             if let Some(ticks) = stamps {
                 let ms = |k: usize| ticks[2 * k + 1].saturating_sub(ticks[2 * k]) as f64 * period_ms;
@@ -760,7 +762,7 @@ impl Gpu {
         let mut encoder = self.device.create_command_encoder(&Default::default());
         encoder.clear_buffer(&f.strong, 0, None);
         Self::pass(&mut encoder, None, 0, dispatches);
-        self.submit_and_read(encoder, scope, &[(output, bytes)], |words, _| words.to_vec())
+        self.submit_and_read(encoder, scope, &[(output, bytes)], false, |words, _| words.to_vec())
     }
 
     /// Hysteresis alone on the GPU, from classify's classes: the stage's GPU-vs-CPU test.
