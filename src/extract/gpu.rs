@@ -215,7 +215,8 @@ pub struct ImageStages {
 }
 
 /// Milliseconds of one frame on the GPU. The stages are read from GPU timestamps where
-/// the adapter has them (else they are 0 and only `submit` says how long it took).
+/// the adapter has them, else they are 0 (`extract_with` counts the rest of the wall
+/// time as the readback).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct GpuTimes {
     /// Writing the depth into the GPU's buffer.
@@ -226,10 +227,6 @@ pub struct GpuTimes {
     pub edges: f64,
     /// Connected components of the non-boundary pixels.
     pub regions: f64,
-    /// From the submit to the readback mapped, all stages included.
-    pub submit: f64,
-    /// Copying what was read back into the CPU's images.
-    pub readback: f64,
 }
 
 /// The four timed stages of the one submit, in order.
@@ -727,7 +724,6 @@ impl Gpu {
         let period_ms = self.queue.get_timestamp_period() as f64 * 1e-6;
         let mut times = GpuTimes { upload, ..Default::default() };
         let (regions, images) = self.submit_and_read(encoder, scope, &outputs, true, |words, stamps| {
-            times.submit = lap();
             if let Some(ticks) = stamps {
                 let ms = |k: usize| ticks[2 * k + 1].saturating_sub(ticks[2 * k]) as f64 * period_ms;
                 [times.diffusion, times.normals, times.edges, times.regions] = [ms(0), ms(1), ms(2), ms(3)];
@@ -742,7 +738,6 @@ impl Gpu {
             });
             (grid(w, h, words[..n].to_vec()), images)
         })?;
-        times.readback = lap();
         Ok(ImageStages { regions, images, times })
     }
 
