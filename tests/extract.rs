@@ -551,7 +551,7 @@ fn a_polygon_is_cut_at_a_neighbour_plane_that_meets_it_and_bounds_its_points_and
     let mut polygons = vec![polygon([0.0, 0.0, 1.0], 0.0, rect(0.0, 0.30)), riser.clone()];
     let tread_points = grid(0.0, 0.28, &|x, y| [x, y, 0.0]);
     let meet = |_: usize, _: usize| true;
-    trim_at_neighbour_planes(&mut polygons, &[tread_points, riser_points.clone()], meet, 0.01);
+    trim_at_neighbour_planes(&mut polygons, &[&tread_points, &riser_points], meet, 0.01);
     let max_x = polygons[0].boundary.iter().map(|v| v[0]).fold(f64::MIN, f64::max);
     assert!((max_x - 0.28).abs() < 1e-9, "the tread ends at the riser's plane, not at {max_x}");
     // The vertices on the cut say so, and name the riser; the others are as they were.
@@ -563,7 +563,7 @@ fn a_polygon_is_cut_at_a_neighbour_plane_that_meets_it_and_bounds_its_points_and
     // A floor with points on both sides of a box face's plane: the plane does not bound it.
     let mut polygons = vec![polygon([0.0, 0.0, 1.0], 0.0, rect(0.0, 0.52)), riser];
     let floor_points = grid(0.0, 0.5, &|x, y| [x, y, 0.0]);
-    trim_at_neighbour_planes(&mut polygons, &[floor_points, riser_points], meet, 0.01);
+    trim_at_neighbour_planes(&mut polygons, &[&floor_points, &riser_points], meet, 0.01);
     let max_x = polygons[0].boundary.iter().map(|v| v[0]).fold(f64::MIN, f64::max);
     assert_eq!(max_x, 0.52, "the floor is left whole");
     // Two boxes side by side, 1 cm apart. Box A's top (z = 0.25, points up to x = 0.30),
@@ -575,11 +575,11 @@ fn a_polygon_is_cut_at_a_neighbour_plane_that_meets_it_and_bounds_its_points_and
     let boxes = vec![polygon([0.0, 0.0, 1.0], -0.25, top), polygon([-1.0, 0.0, 0.0], 0.31, side)];
     let points = [grid(0.0, 0.30, &|x, y| [x, y, 0.25]), grid(0.0, 0.2, &|z, y| [0.31, y, z])];
     let mut apart = boxes.clone();
-    trim_at_neighbour_planes(&mut apart, &points, |_, _| false, 0.01);
+    trim_at_neighbour_planes(&mut apart, &[&points[0], &points[1]], |_, _| false, 0.01);
     assert_eq!(apart, boxes, "faces that do not meet are left as they are");
     // Had they met (the rule before creases were asked for), A's top was cut there.
     let mut meeting = boxes.clone();
-    trim_at_neighbour_planes(&mut meeting, &points, meet, 0.01);
+    trim_at_neighbour_planes(&mut meeting, &[&points[0], &points[1]], meet, 0.01);
     let max_x = meeting[0].boundary.iter().map(|v| v[0]).fold(f64::MIN, f64::max);
     assert!((max_x - 0.31).abs() < 1e-9, "{max_x}");
 }

@@ -1,17 +1,18 @@
 //! Outlines of regions: outer contour and holes, simplified to polygons in pixel
 //! coordinates.
 //!
-//! imageproc does the tracing (Suzuki-Abe border following, the algorithm behind
-//! OpenCV's findContours) with 8-connectivity, the connectivity of the regions, so a
-//! contour and its region always agree; Douglas-Peucker simplifies.
+//! Borders are followed as Suzuki & Abe do it ("Topological structural analysis of
+//! digitized binary images by border following", CVGIP 30(1), 1985; the algorithm behind
+//! OpenCV's findContours and imageproc's `find_contours`), with 8-connectivity, the
+//! connectivity of the regions, so a contour and its region always agree. Here it runs on
+//! the label image itself, visiting only a region's pixels and its border: no mask per
+//! region, no scan of its bounding box. Douglas-Peucker (imageproc) simplifies.
 
-use image::{GrayImage, Luma};
-use imageproc::contours::{BorderType, find_contours};
 use imageproc::geometry::approximate_polygon_dp;
 use imageproc::point::Point;
 use rayon::prelude::*;
 
-use super::segment::{Segmentation, bounding_box};
+use super::segment::Segmentation;
 
 /// One region: its component label, outline and holes (pixel centres, simplified).
 #[derive(Clone, Debug, PartialEq)]
@@ -20,48 +21,198 @@ pub struct Region {
     pub outer: Vec<[f32; 2]>,
     pub holes: Vec<Vec<[f32; 2]>>,
     pub pixels: usize,
+    /// The camera-frame points of its pixels (valid ones), for regions that are outlined.
+    pub points: Vec<[f32; 3]>,
 }
 
 /// The outline and holes of every region r of `seg` with `wanted[r]` (the others are left
 /// without: no polygon is made of them), simplified by Douglas-Peucker with
 /// `simplify_px`, then moved half a pixel outwards (holes shrink) so that the polygon
-/// covers its pixels' squares rather than joining their centres.
+/// covers its pixels' squares rather than joining their centres. A region in more than
+/// one piece is outlined by its first piece in scan order.
 pub fn trace(seg: &Segmentation, simplify_px: f64, wanted: &[bool]) -> Vec<Region> {
-    let w = seg.labels.width;
+    let (w, h) = (seg.labels.width, seg.labels.height);
     seg.pixels
         .par_iter()
         .enumerate()
         .map(|(r, pixels)| {
             let label = r as u32 + 1;
+            let mut region =
+                Region { label, outer: Vec::new(), holes: Vec::new(), pixels: pixels.len(), points: Vec::new() };
             if pixels.is_empty() || !wanted[r] {
-                return Region { label, outer: Vec::new(), holes: Vec::new(), pixels: pixels.len() };
+                return region;
             }
-            // The region's bounding box with a one-pixel margin, so its border is traced whole.
-            let [u0, v0, u1, v1] = bounding_box(pixels, w);
-            let mut mask = GrayImage::new((u1 - u0 + 3) as u32, (v1 - v0 + 3) as u32);
-            for &i in pixels {
-                let (u, v) = (i as usize % w, i as usize / w);
-                mask.put_pixel((u - u0 + 1) as u32, (v - v0 + 1) as u32, Luma([255]));
-            }
-            let to_image = |ring: Vec<[f32; 2]>, outwards: f32| -> Vec<[f32; 2]> {
-                offset_ring(&ring, outwards).iter().map(|p| [p[0] + u0 as f32 - 1.0, p[1] + v0 as f32 - 1.0]).collect()
-            };
-            let contours = find_contours::<i32>(&mask);
-            let outer_index = contours.iter().position(|c| c.border_type == BorderType::Outer);
-            let mut region = Region { label, outer: Vec::new(), holes: Vec::new(), pixels: pixels.len() };
-            let Some(oi) = outer_index else { return region };
-            region.outer = to_image(simplify(&contours[oi].points, simplify_px), 0.5);
-            for c in &contours {
-                if c.border_type == BorderType::Hole && c.parent == Some(oi) {
-                    let hole = simplify(&c.points, simplify_px);
+            let shape = Shape { labels: &seg.labels.data, width: w, height: h, label };
+            let borders = MARKS.with_borrow_mut(|marks| {
+                marks.resize(w * h, 0);
+                follow_borders(&shape, pixels, marks)
+            });
+            let Some(oi) = borders.iter().position(|b| b.kind == BorderKind::Outer) else { return region };
+            region.outer = offset_ring(&simplify(&borders[oi].points, simplify_px), 0.5);
+            for b in &borders {
+                if b.kind == BorderKind::Hole && b.parent == Some(oi) {
+                    let hole = simplify(&b.points, simplify_px);
                     if hole.len() >= 3 {
-                        region.holes.push(to_image(hole, -0.5));
+                        region.holes.push(offset_ring(&hole, -0.5));
                     }
                 }
             }
             region
         })
         .collect()
+}
+
+thread_local! {
+    /// `follow_borders`' marks, one per pixel, all 0 between calls: made once per thread.
+    static MARKS: std::cell::RefCell<Vec<i32>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// The pixels labelled `label` in an image of labels.
+pub struct Shape<'a> {
+    pub labels: &'a [u32],
+    pub width: usize,
+    pub height: usize,
+    pub label: u32,
+}
+
+impl Shape<'_> {
+    /// Whether pixel (x, y) is the shape's: false off the image.
+    #[inline(always)]
+    fn has(&self, x: i32, y: i32) -> bool {
+        x >= 0
+            && y >= 0
+            && (x as usize) < self.width
+            && (y as usize) < self.height
+            && self.labels[y as usize * self.width + x as usize] == self.label
+    }
+}
+
+/// Whether a border has the shape's inside or a hole's on its inner side.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BorderKind {
+    Outer,
+    Hole,
+}
+
+/// One border: its pixels in the order followed, and the index of the border around it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Border {
+    pub points: Vec<Point<i32>>,
+    pub kind: BorderKind,
+    pub parent: Option<usize>,
+}
+
+/// The 8 neighbours, clockwise on the image (y down) from the west.
+const DIRECTIONS: [(i32, i32); 8] = [(-1, 0), (-1, -1), (0, -1), (1, -1), (1, 0), (1, 1), (0, 1), (-1, 1)];
+const EAST: usize = 4;
+const WEST: usize = 0;
+
+/// Every border of `shape`, whose pixel indices are `pixels` (ascending), as Suzuki &
+/// Abe's algorithm 1 finds them scanning the shape with a background margin around the
+/// image. `marks` (one per image pixel) must be all 0, and is again on return.
+pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut [i32]) -> Vec<Border> {
+    // marks: 0 = a pixel no border has passed; n >= 2 = passed by border n - 2 (its
+    // number in the paper); -n = passed by it with its east neighbour, background, seen.
+    let w = shape.width;
+    let mut borders: Vec<Border> = Vec::new();
+    // The row and where it starts, updated as the pixels move on to another (a division
+    // per row, not per pixel: it was most of the scan's time).
+    let (mut y, mut row_start) = (usize::MAX, 0);
+    let mut parent_number = 1;
+    for (k, &i) in pixels.iter().enumerate() {
+        let i = i as usize;
+        if y == usize::MAX || i >= row_start + w {
+            (y, parent_number) = (i / w, 1);
+            row_start = y * w;
+        }
+        let x = i - row_start;
+        // The west and east neighbours are the shape's when they are the list's neighbours.
+        let west_in = x > 0 && k > 0 && pixels[k - 1] as usize == i - 1;
+        let east_in = x + 1 < w && pixels.get(k + 1).is_some_and(|&j| j as usize == i + 1);
+        let start = if marks[i] == 0 && !west_in {
+            Some((WEST, BorderKind::Outer))
+        } else if marks[i] >= 0 && !east_in {
+            if marks[i] > 1 {
+                parent_number = marks[i] as usize;
+            }
+            Some((EAST, BorderKind::Hole))
+        } else {
+            None
+        };
+        if let Some((from, kind)) = start {
+            let number = borders.len() as i32 + 2;
+            let parent = (parent_number > 1).then(|| {
+                let p = parent_number - 2;
+                if (kind == BorderKind::Outer) ^ (borders[p].kind == BorderKind::Outer) {
+                    Some(p)
+                } else {
+                    borders[p].parent
+                }
+            });
+            let points = follow(shape, (x as i32, y as i32), from, number, marks);
+            borders.push(Border { points, kind, parent: parent.flatten() });
+        }
+        if marks[i] != 0 {
+            parent_number = marks[i].unsigned_abs() as usize;
+        }
+    }
+    for b in &borders {
+        for p in &b.points {
+            marks[p.y as usize * w + p.x as usize] = 0;
+        }
+    }
+    borders
+}
+
+/// Follows the border through `start`, whose neighbour towards `from` is background,
+/// marking its pixels with `number` (step 3 of the paper's algorithm 1).
+fn follow(shape: &Shape, start: (i32, i32), from: usize, number: i32, marks: &mut [i32]) -> Vec<Point<i32>> {
+    let width = shape.width;
+    let step = |(x, y): (i32, i32), d: usize| (x + DIRECTIONS[d].0, y + DIRECTIONS[d].1);
+    let at = |(x, y): (i32, i32)| y as usize * width + x as usize;
+    // The first pixel of the shape clockwise from `from`: none, and `start` is alone.
+    let Some(first) = (0..8).map(|k| (from + k) % 8).find(|&d| {
+        let (x, y) = step(start, d);
+        shape.has(x, y)
+    }) else {
+        marks[at(start)] = -number;
+        return vec![Point::new(start.0, start.1)];
+    };
+    let second = step(start, first);
+    let (mut previous, mut current) = (second, start);
+    let mut points = Vec::new();
+    loop {
+        points.push(Point::new(current.0, current.1));
+        let back = DIRECTIONS
+            .iter()
+            .position(|&d| d == (previous.0 - current.0, previous.1 - current.1))
+            .expect("a neighbour");
+        // Counter-clockwise from just before the pixel we came from: the next border pixel
+        // (the one we came from at worst), noting whether the east was seen empty on the way.
+        let mut east_seen = false;
+        let mut next = back;
+        for k in 1..=8 {
+            let d = (back + 8 - k) % 8;
+            let (x, y) = step(current, d);
+            if shape.has(x, y) {
+                next = d;
+                break;
+            }
+            east_seen |= d == EAST;
+        }
+        let following = step(current, next);
+        let m = &mut marks[at(current)];
+        if east_seen {
+            *m = -number;
+        } else if *m == 0 {
+            *m = number;
+        }
+        if following == start && current == second {
+            break;
+        }
+        (previous, current) = (current, following);
+    }
+    points
 }
 
 fn simplify(pts: &[Point<i32>], tolerance: f64) -> Vec<[f32; 2]> {
@@ -107,4 +258,51 @@ pub fn offset_vertices(ring: &[[f64; 2]], d: &[f64]) -> Vec<[f64; 2]> {
             [ring[i][0] + sx * scale, ring[i][1] + sy * scale]
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use image::{GrayImage, Luma};
+    use imageproc::contours::{BorderType, find_contours};
+    use rand::{RngExt, SeedableRng};
+
+    /// imageproc's Suzuki & Abe, on the shape with the background margin drawn in.
+    fn imageproc_borders(shape: &[bool], w: usize, h: usize) -> Vec<Border> {
+        let mut mask = GrayImage::new(w as u32 + 2, h as u32 + 2);
+        for (i, _) in shape.iter().enumerate().filter(|(_, s)| **s) {
+            mask.put_pixel((i % w) as u32 + 1, (i / w) as u32 + 1, Luma([255]));
+        }
+        find_contours::<i32>(&mask)
+            .into_iter()
+            .map(|c| Border {
+                points: c.points.iter().map(|p| Point::new(p.x - 1, p.y - 1)).collect(),
+                kind: if c.border_type == BorderType::Outer { BorderKind::Outer } else { BorderKind::Hole },
+                parent: c.parent,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn borders_followed_on_the_shape_are_imageproc_s_on_a_mask() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut counts = [0usize; 2];
+        // Noise of every density (islands, holes in holes, one-pixel shapes and lines),
+        // touching the image's edges, on odd sizes.
+        for case in 0..300 {
+            let (w, h) = (rng.random_range(1..40), rng.random_range(1..30));
+            let density = [0.1, 0.3, 0.5, 0.7, 0.9][case % 5];
+            let shape: Vec<bool> = (0..w * h).map(|_| rng.random_bool(density)).collect();
+            let labels: Vec<u32> = shape.iter().map(|&s| s as u32 * 3).collect();
+            let pixels: Vec<u32> = (0..w * h).filter(|&i| shape[i]).map(|i| i as u32).collect();
+            let mut marks = vec![0i32; w * h];
+            let ours = follow_borders(&Shape { labels: &labels, width: w, height: h, label: 3 }, &pixels, &mut marks);
+            assert_eq!(ours, imageproc_borders(&shape, w, h), "case {case}: {w}x{h} at density {density}");
+            assert!(marks.iter().all(|&m| m == 0), "case {case}: marks left behind");
+            for b in &ours {
+                counts[(b.kind == BorderKind::Hole) as usize] += 1;
+            }
+        }
+        assert!(counts[0] > 1000 && counts[1] > 1000, "outer and hole borders both compared: {counts:?}");
+    }
 }

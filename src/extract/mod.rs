@@ -328,18 +328,22 @@ pub fn segment_and_fit(
     seg.join_coplanar(&mut fits, cloud, cfg.depth_edge_ratio as f32, dist, min_ratio);
     let accepted: Vec<bool> = fits.iter().map(|f| f.is_some_and(|f| f.inlier_ratio() >= min_ratio)).collect();
     seg.grow(&fits, &accepted, cloud, dist, cfg.region_grow_px);
-    refit_grown(&seg, &mut fits, &accepted, cloud, dist, min_ratio);
+    let mut points = refit_grown(&seg, &mut fits, &accepted, cloud, dist, min_ratio);
     // Outlines only for the planes that can become polygons: the refit keeps each accepted
     // region accepted and touches no other, so `accepted` still says which.
-    let regions = contours::trace(&seg, cfg.simplify_tolerance_px, &accepted);
+    let mut regions = contours::trace(&seg, cfg.simplify_tolerance_px, &accepted);
+    for (region, points) in regions.iter_mut().zip(&mut points) {
+        region.points = std::mem::take(points);
+    }
     times.contours += lap();
     Ok((seg, regions, fits))
 }
 
-/// Fits each accepted region's plane again on its grown pixels. Growth gives a region back
-/// the band along its border that edges and closing ate; for a thin strip (a tread cut by
-/// the image's edge, ten rows tall) that band doubles its support across, and the plane
-/// fitted without it can be tilted by a degree.
+/// Fits each accepted region's plane again on its grown pixels, and hands back those
+/// pixels' points (none for the other regions). Growth gives a region back the band along
+/// its border that edges and closing ate; for a thin strip (a tread cut by the image's
+/// edge, ten rows tall) that band doubles its support across, and the plane fitted without
+/// it can be tilted by a degree.
 fn refit_grown(
     seg: &Segmentation,
     fits: &mut [Option<PlaneFit>],
@@ -347,21 +351,24 @@ fn refit_grown(
     cloud: &Cloud,
     dist: f32,
     min_ratio: f64,
-) {
+) -> Vec<Vec<[f32; 3]>> {
     use rayon::prelude::*;
-    let grown: Vec<usize> = (0..fits.len()).filter(|&r| accepted[r]).collect();
-    let batch = seg.points(&grown, cloud);
-    let refits: Vec<Option<PlaneFit>> = grown
-        .par_iter()
-        .zip(&batch.ranges)
-        .map(|(&r, range)| {
-            let f = fits[r]?;
-            cpu::ransac::refit(&batch.points[range.clone()], f.normal_f32(), f.offset as f32, dist)
+    let refits: Vec<(Option<PlaneFit>, Vec<[f32; 3]>)> = (0..fits.len())
+        .into_par_iter()
+        .map(|r| {
+            let Some(f) = fits[r].filter(|_| accepted[r]) else { return (None, Vec::new()) };
+            let points = seg.points_of(r, cloud);
+            (cpu::ransac::refit(&points, f.normal_f32(), f.offset as f32, dist), points)
         })
         .collect();
-    for (&r, new) in grown.iter().zip(refits) {
-        if let Some(new) = new.filter(|f| f.inlier_ratio() >= min_ratio) {
-            fits[r] = Some(new);
-        }
-    }
+    refits
+        .into_iter()
+        .zip(fits.iter_mut())
+        .map(|((new, points), fit)| {
+            if let Some(new) = new.filter(|f| f.inlier_ratio() >= min_ratio) {
+                *fit = Some(new);
+            }
+            points
+        })
+        .collect()
 }

@@ -166,7 +166,7 @@ pub fn build_polygons(
             // Known once the polygon is kept (below): most regions are not.
             uncertainty: PlaneUncertainty::default(),
         });
-        points.push(seg.points(&[region.label as usize - 1], cloud).points);
+        points.push(region.points.as_slice());
         plane_fits.push(*fit);
         labels.push(region.label);
     }

@@ -75,13 +75,21 @@ impl Segmentation {
 
     /// Camera-frame points (raw depth, valid pixels only) of the given regions, in that order.
     pub fn points(&self, regions: &[usize], cloud: &Cloud) -> PointBatch {
-        let mut batch = PointBatch::default();
+        let total = regions.iter().map(|&r| self.pixels[r].len()).sum();
+        let mut batch = PointBatch { points: Vec::with_capacity(total), ranges: Vec::with_capacity(regions.len()) };
         for &r in regions {
             let start = batch.points.len();
             batch.points.extend(self.pixels[r].iter().filter_map(|&i| cloud.point(i as usize)));
             batch.ranges.push(start..batch.points.len());
         }
         batch
+    }
+
+    /// Camera-frame points (raw depth, valid pixels only) of region r.
+    pub fn points_of(&self, r: usize, cloud: &Cloud) -> Vec<[f32; 3]> {
+        let mut points = Vec::with_capacity(self.pixels[r].len());
+        points.extend(self.pixels[r].iter().filter_map(|&i| cloud.point(i as usize)));
+        points
     }
 
     /// Splits every region whose fit has an inlier ratio under `min_ratio`: it keeps the
@@ -125,9 +133,8 @@ impl Segmentation {
             for &i in &best {
                 self.labels.data[i as usize] = label;
             }
-            let pts: Vec<[f32; 3]> = best.iter().filter_map(|&i| cloud.point(i as usize)).collect();
-            fits[r] = refit(&pts, fit.normal_f32(), fit.offset as f32, dist);
             self.pixels[r] = best;
+            fits[r] = refit(&self.points_of(r, cloud), fit.normal_f32(), fit.offset as f32, dist);
             let mut seen = vec![false; w * h];
             for &i in &old {
                 let i = i as usize;
@@ -332,10 +339,8 @@ impl Segmentation {
             if a == b || n < MIN_CREASE_STEPS || fa.normal.dot(&fb.normal) < JOIN_ANGLE_COS {
                 continue;
             }
-            let points_of = |r: usize| self.pixels[r].iter().filter_map(|&i| cloud.point(i as usize));
-            let mut pts: Vec<[f32; 3]> = points_of(a).collect();
-            let na = pts.len();
-            pts.extend(points_of(b));
+            let both = self.points(&[a, b], cloud);
+            let (na, pts) = (both.ranges[0].len(), both.points);
             let start = if fa.points >= fb.points { fa } else { fb };
             let Some(joined) = refit(&pts, start.normal_f32(), start.offset as f32, dist) else { continue };
             // Each piece on the joined plane, not just their sum: a large region would

@@ -29,7 +29,7 @@ const STRAY_SHARE: f64 = 0.005;
 /// polygons a and b meet along a crease; `dist` is the inlier distance, m.
 pub fn trim_at_neighbour_planes(
     polygons: &mut [Polygon],
-    points: &[Vec<[f32; 3]>],
+    points: &[&[[f32; 3]]],
     meet: impl Fn(usize, usize) -> bool,
     dist: f64,
 ) {
