@@ -372,6 +372,76 @@ fn the_map_s_plane_covariance_is_its_observations_fused_and_shrinks_as_they_come
     assert!((v - variances[7]).abs() <= 1e-6 * v, "an unknown covariance changed the fused one: {v}");
 }
 
+/// A horizontal tread over x 0..0.8, y -0.5..0.5 at height `z`, its plane known to
+/// `sigma_m` at its centre (tilts known to 1e-6 rad: their lever arms add nothing).
+fn tread_known_to(z: f64, sigma_m: f64, pose: &Isometry3<f64>) -> Polygon {
+    let mut tread = seen(&rect(0.0, -0.5, 0.8, 0.5), z, pose);
+    let world = PlaneUncertainty {
+        centre: [0.4, 0.0, z],
+        axes: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        cov: [[1e-12, 0.0, 0.0], [0.0, 1e-12, 0.0], [0.0, 0.0, sigma_m * sigma_m]],
+    };
+    tread.uncertainty = world.moved(
+        |v| (pose.inverse().rotation * Vector3::from(v)).into(),
+        |v| (pose.inverse() * Point3::from(v)).coords.into(),
+    );
+    tread
+}
+
+#[test]
+fn the_map_s_plane_weighs_each_observation_by_how_well_its_plane_is_known() {
+    let (pose, intr) = camera();
+    // No drift filter: it would read the two heights' difference as drift.
+    let cfg = MapConfig { drift_filter: false, ..MapConfig::default() };
+    // The same tread seen twice, 2 mm apart: once known to 0.2 mm, once to 2 mm.
+    let (precise, noisy) = (tread_known_to(0.200, 0.0002, &pose), tread_known_to(0.202, 0.002, &pose));
+    // Inverse-variance weights: 25e6 and 0.25e6 per m^2 of variance.
+    let (wp, wn) = (1.0 / 0.0002f64.powi(2), 1.0 / 0.002f64.powi(2));
+    let want = (0.200 * wp + 0.202 * wn) / (wp + wn);
+    for order in [[&precise, &noisy], [&noisy, &precise]] {
+        let mut map = PolygonMap::new(&cfg);
+        for tread in order {
+            map.update(std::slice::from_ref(tread), &pose, &intr, None);
+        }
+        let snap = map.snapshot();
+        assert_eq!(snap.polygons.len(), 1, "one tread");
+        let height = snap.polygons[0].height_at(0.4, 0.0);
+        // Weighted by area alone both count the same: 0.201.
+        assert!((height - want).abs() < 1e-7, "height {height}, the weighted mean is {want}");
+    }
+}
+
+#[test]
+fn a_snapshot_keeps_the_plane_covariance_and_weight_so_a_reloaded_map_fuses_on_as_if_never_saved() {
+    let (pose, intr) = camera();
+    let cfg = MapConfig { drift_filter: false, ..MapConfig::default() };
+    let mut map = PolygonMap::new(&cfg);
+    for (z, sigma) in [(0.200, 0.0005), (0.201, 0.001), (0.1995, 0.0008)] {
+        map.update(&[tread_known_to(z, sigma, &pose)], &pose, &intr, None);
+    }
+    let saved = map.snapshot();
+    let mut reloaded = PolygonMap::from_snapshot(&cfg, &saved).unwrap();
+    let again = reloaded.snapshot();
+    let (a, b) = (&saved.polygons[0], &again.polygons[0]);
+    let v = distance_variance(&a.plane_covariance, a.centroid);
+    assert!(v > 0.0, "the saved covariance is known");
+    for k in 0..16 {
+        assert!((a.plane_covariance[k] - b.plane_covariance[k]).abs() <= 1e-9 * v, "entry {k}: {a:?} vs {b:?}");
+    }
+    // One more, noisier view: both maps move the same way, the reloaded one weighing what
+    // it had as the three views it fused.
+    let next = tread_known_to(0.203, 0.0006, &pose);
+    map.update(std::slice::from_ref(&next), &pose, &intr, None);
+    reloaded.update(std::slice::from_ref(&next), &pose, &intr, None);
+    let (a, b) = (&map.snapshot().polygons[0], &reloaded.snapshot().polygons[0]);
+    let (ha, hb) = (a.height_at(0.4, 0.0), b.height_at(0.4, 0.0));
+    assert!((ha - hb).abs() < 2e-6, "heights after one more view: {ha} live, {hb} reloaded");
+    assert!(ha > 0.2001 && ha < 0.2015, "the new view moved the plane by its weight: {ha}");
+    let (va, vb) =
+        (distance_variance(&a.plane_covariance, a.centroid), distance_variance(&b.plane_covariance, b.centroid));
+    assert!(va < v && (va - vb).abs() <= 1e-6 * va, "variance {v} -> {va} live, {vb} reloaded");
+}
+
 #[test]
 fn drift_filter_follows_the_papers_equations() {
     let mut f = DriftFilter::new(4e-6, 1e-6);

@@ -115,6 +115,26 @@ impl PlaneUncertainty {
         out
     }
 
+    /// The uncertainty about `centre` and in-plane `axes` whose coefficient covariance is
+    /// `c` (as `coefficient_covariance` gives it): a = e . dn and shift = -(dn . centre + dd)
+    /// taken of the coefficients' errors (dn, dd).
+    pub fn from_coefficient_covariance(c: &[f64; 16], centre: [f64; 3], axes: [[f64; 3]; 2]) -> PlaneUncertainty {
+        let (e1, e2, x) = (Vector3::from(axes[0]), Vector3::from(axes[1]), Vector3::from(centre));
+        let j = nalgebra::Matrix3x4::new(e1.x, e1.y, e1.z, 0.0, e2.x, e2.y, e2.z, 0.0, -x.x, -x.y, -x.z, -1.0);
+        let cov = j * nalgebra::Matrix4::from_row_slice(c) * j.transpose();
+        PlaneUncertainty { centre, axes, cov: ((cov + cov.transpose()) / 2.0).into() }
+    }
+
+    /// The variance of the plane's position along its normal, averaged over a surface
+    /// around `centre` whose points lie `lever_sq` m^2 from it on average: the shift's
+    /// variance plus the tilts' times their lever arm.
+    pub fn mean_offset_variance(&self, lever_sq: f64) -> f64 {
+        let [[a, _, _], [_, d, _], [_, _, s]] = self.cov;
+        // Averaged over every direction in the plane, a tilt's lever arm squared is half
+        // the mean squared distance.
+        s + (a + d) / 2.0 * lever_sq
+    }
+
     /// The same uncertainty seen in another frame (`rotate` then `translate`).
     pub fn moved(&self, rotate: impl Fn([f64; 3]) -> [f64; 3], translate: impl Fn([f64; 3]) -> [f64; 3]) -> Self {
         PlaneUncertainty { centre: translate(self.centre), axes: self.axes.map(rotate), cov: self.cov }

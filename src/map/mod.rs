@@ -4,6 +4,7 @@
 //! A map polygon keeps its shape as a 2-D `geo` shape in a frame fixed on its plane, so a
 //! merge is a true polygon union (non-convex, holes kept), simplified to a bounded vertex
 //! count. Its plane is the least-squares plane of the area moments of every observation,
+//! each weighted by how well its extractor knew its plane (`observation_weight`),
 //! re-estimated on each merge. Clearing: a map polygon in view that the depth image
 //! contradicts (the camera sees through it, or something else stands in its place) for
 //! `clear_after_frames` frames in a row is removed.
@@ -59,7 +60,7 @@ pub struct MapPolygon {
     pub step: Option<u32>,
     /// Covariance of the plane's coefficients (normal x, y, z, offset), row-major: the
     /// observations' plane covariances fused (extract::uncertainty). All zero when unknown
-    /// (a map read back from a snapshot, until it is seen again).
+    /// (no observation said; a snapshot keeps it).
     #[serde(default = "unknown_covariance")]
     pub plane_covariance: [f64; 16],
 }
@@ -494,7 +495,8 @@ impl PolygonMap {
                     normal = -normal;
                     offset = -offset;
                 }
-                let moments = Moments::of_polygon(&w.boundary, &w.holes, &normal);
+                let surface = Moments::of_polygon(&w.boundary, &w.holes, &normal);
+                let moments = surface.scaled(observation_weight(&w.uncertainty, &surface));
                 Observation {
                     aabb: aabb(&w.boundary),
                     plane: Plane { normal, offset },
@@ -710,14 +712,20 @@ impl PolygonMap {
             if let Some(why) = polygon_problem(&as_frame_polygon) {
                 return Err(format!("polygon {}: {why}", p.id));
             }
-            let moments = Moments::of_polygon(&p.boundary, &p.holes, &normal).scaled(p.observations.max(1) as f64);
+            let surface = Moments::of_polygon(&p.boundary, &p.holes, &normal);
+            let uncertainty = snapshot_uncertainty(p);
+            // Weighted as the observations it fuses were: its fused covariance is their
+            // information summed; without one, as many surfaces as it had observations.
+            let moments = surface.scaled(if uncertainty.is_known() {
+                observation_weight(&uncertainty, &surface)
+            } else {
+                p.observations.max(1) as f64
+            });
             let o = Observation {
                 aabb: aabb(&p.boundary),
                 plane: Plane { normal, offset: p.offset },
                 moments,
-                // Snapshots keep the 4 x 4 coefficient covariance, not its parametrisation:
-                // unknown until the polygon is seen again.
-                uncertainty: PlaneUncertainty::default(),
+                uncertainty,
                 horizontal: false,
                 erode: vec![0.0; p.boundary.len()],
                 erode_holes: p.holes.iter().map(|h| vec![0.0; h.len()]).collect(),
@@ -991,6 +999,49 @@ fn plane_covariance(u: &PlaneUncertainty, normal: &Vector3<f64>, centroid: [f64;
     let Some(f1) = (e1 - normal * e1.dot(normal)).try_normalize(1e-9) else { return unknown_covariance() };
     let f2 = normal.cross(&f1);
     u.expressed_at(centroid, [f1.into(), f2.into()]).coefficient_covariance()
+}
+
+/// A snapshot polygon's plane uncertainty, from the coefficient covariance it was saved
+/// with (about its centroid, on axes of its plane); unknown if it was saved without.
+fn snapshot_uncertainty(p: &MapPolygon) -> PlaneUncertainty {
+    let n = Vector3::from(p.normal);
+    let helper = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+    let (Some(e1), true) = (n.cross(&helper).try_normalize(1e-9), p.plane_covariance.iter().all(|c| c.is_finite()))
+    else {
+        return PlaneUncertainty::default();
+    };
+    let u = PlaneUncertainty::from_coefficient_covariance(
+        &p.plane_covariance,
+        p.centroid,
+        [e1.into(), n.cross(&e1).into()],
+    );
+    if u.is_known() { u } else { PlaneUncertainty::default() }
+}
+
+/// The variance, m^2, that counts as one unit of weight: an observation whose plane is
+/// known to 1 mm over its surface weighs 1.
+const UNIT_WEIGHT_VARIANCE_M2: f64 = 1e-6;
+/// Below this variance (10 um) a plane is as well known as any: noise-free synthetic
+/// planes would otherwise weigh without bound.
+const MIN_WEIGHT_VARIANCE_M2: f64 = 1e-10;
+
+/// What an observation's surface moments are scaled by, so that its total weight is its
+/// plane's information: 1 over the variance of the plane's position averaged over the
+/// surface (shift and tilts at their lever arms, extract::uncertainty), in units of
+/// `UNIT_WEIGHT_VARIANCE_M2`. A far or grazing view, whose plane is noisier, counts less
+/// than a near one of the same surface. Unknown uncertainty (hand-made polygons): 1, the
+/// surface's area, as before weights.
+fn observation_weight(u: &PlaneUncertainty, surface: &Moments) -> f64 {
+    if !u.is_known() || !(surface.weight > 0.0) {
+        return 1.0;
+    }
+    let centre = surface.sum / surface.weight;
+    let lever_sq = (surface.sum_sq / surface.weight - centre * centre.transpose()).trace().max(0.0);
+    let variance = u.expressed_at(centre.into(), u.axes).mean_offset_variance(lever_sq);
+    if !variance.is_finite() {
+        return 1.0;
+    }
+    UNIT_WEIGHT_VARIANCE_M2 / variance.max(MIN_WEIGHT_VARIANCE_M2) / surface.weight
 }
 
 fn aabb(points: &[[f64; 3]]) -> [[f64; 3]; 2] {
