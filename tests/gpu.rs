@@ -199,7 +199,7 @@ fn hysteresis_boundary_and_regions_alone_are_the_cpu_twin_s_bit_for_bit() {
 #[test]
 fn batched_scores_match_the_cpu_scores_exactly_on_planted_planes() {
     let Some(gpu) = gpu() else { return };
-    let gpu = gpu.lock().unwrap_or_else(|e| e.into_inner());
+    let mut gpu = gpu.lock().unwrap_or_else(|e| e.into_inner());
     // Several regions of very different sizes (3 points up to past the scoring cap), and an empty one.
     let mut batch = ransac::PointBatch::default();
     let mut state = 7u32;
@@ -225,4 +225,22 @@ fn batched_scores_match_the_cpu_scores_exactly_on_planted_planes() {
     }
     assert!(cpu[2 * 20..3 * 20].iter().any(|&s| s > 800), "the 1000-point plane has a good hypothesis");
     assert!(g[4 * 20..5 * 20].iter().all(|&s| s == 0), "an empty region scores nothing");
+    // The buffers are kept between batches: a smaller batch after it (the larger one's
+    // points still lie beyond), then one that outgrows them (more hypotheses, more points).
+    let small =
+        ransac::PointBatch { points: batch.points[..batch.ranges[2].end].to_vec(), ranges: batch.ranges[..3].to_vec() };
+    let mut large = batch.clone();
+    for k in 0..30_000 {
+        let t = k as f32 / 30_000.0;
+        large.points.push([t, 0.5 - t, 2.0 + 0.001 * (k % 3) as f32]);
+    }
+    large.ranges.push(batch.points.len()..large.points.len());
+    for (name, b, hypotheses) in [("smaller", &small, 20), ("larger", &large, 32)] {
+        let (cpu, g) =
+            (ransac::score_hypotheses(b, hypotheses, 0.01), gpu.score_hypotheses(b, hypotheses, 0.01).unwrap());
+        assert_eq!(g.len(), b.ranges.len() * hypotheses as usize, "{name}");
+        for (k, (a, c)) in cpu.iter().zip(&g).enumerate() {
+            assert!(a.abs_diff(*c) <= 2, "{name} batch, score {k}: cpu {a} gpu {c}");
+        }
+    }
 }

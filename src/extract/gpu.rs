@@ -289,6 +289,23 @@ pub struct Gpu {
     ransac: Shader,
     timestamps: bool,
     frame: Option<Frame>,
+    ransac_buffers: Option<RansacBuffers>,
+}
+
+/// The RANSAC batch's buffers, sized for the largest batch so far (to the next power of
+/// two) and made again only when a batch outgrows them: a frame's batches are rewritten
+/// in place.
+struct RansacBuffers {
+    /// Points and regions they hold room for; hypotheses x regions scores.
+    points: u64,
+    regions: u64,
+    hypotheses: u32,
+    params: wgpu::Buffer,
+    point_buffer: wgpu::Buffer,
+    ranges: wgpu::Buffer,
+    scores: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    group: wgpu::BindGroup,
 }
 
 /// Usages of every image buffer: bound as storage, filled and read back by copies.
@@ -382,6 +399,7 @@ impl Gpu {
             info,
             timestamps,
             frame: None,
+            ransac_buffers: None,
         };
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Shader(e.to_string()));
@@ -821,7 +839,7 @@ impl Gpu {
     /// Inlier counts of every (region, hypothesis), row-major by region: one dispatch
     /// for the whole frame, the same numbers as `cpu::ransac::score_hypotheses`.
     pub fn score_hypotheses(
-        &self,
+        &mut self,
         batch: &PointBatch,
         hypotheses: u32,
         inlier_distance: f32,
@@ -831,25 +849,44 @@ impl Gpu {
         if total == 0 {
             return Ok(Vec::new());
         }
-        let init = |label: &str, contents: &[u8]| {
-            self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents: if contents.is_empty() { &[0; 4] } else { contents },
-                usage: wgpu::BufferUsages::STORAGE,
-            })
+        let fits = |b: &RansacBuffers| {
+            b.points >= batch.points.len() as u64 && b.regions >= regions as u64 && b.hypotheses >= hypotheses
         };
-        let points = init("points", bytemuck::cast_slice(&batch.points));
+        if !self.ransac_buffers.as_ref().is_some_and(fits) {
+            let (points, regions) = (
+                (batch.points.len() as u64).next_power_of_two().max(4096),
+                (regions as u64).next_power_of_two().max(64),
+            );
+            let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+            let params = self.uniform(bytemuck::bytes_of(&<RansacParams as bytemuck::Zeroable>::zeroed()));
+            let point_buffer = self.buffer("points", points * 12, storage);
+            let ranges = self.buffer("ranges", regions * 8, storage);
+            let score_bytes = regions * hypotheses as u64 * 4;
+            let scores = self.buffer("scores", score_bytes, IMAGE);
+            let staging =
+                self.buffer("scores read", score_bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
+            let group = self.bind(&self.ransac, &[&params, &point_buffer, &ranges, &scores]);
+            self.ransac_buffers = Some(RansacBuffers {
+                points,
+                regions,
+                hypotheses,
+                params,
+                point_buffer,
+                ranges,
+                scores,
+                staging,
+                group,
+            });
+        }
+        let b = self.ransac_buffers.as_ref().expect("made above");
+        let params = RansacParams { hypotheses, regions, inlier_distance, max_score_points: MAX_SCORE_POINTS as u32 };
+        self.queue.write_buffer(&b.params, 0, bytemuck::bytes_of(&params));
+        if !batch.points.is_empty() {
+            self.queue.write_buffer(&b.point_buffer, 0, bytemuck::cast_slice(&batch.points));
+        }
         let ranges: Vec<[u32; 2]> = batch.ranges.iter().map(|r| [r.start as u32, (r.end - r.start) as u32]).collect();
-        let ranges = init("ranges", bytemuck::cast_slice(&ranges));
+        self.queue.write_buffer(&b.ranges, 0, bytemuck::cast_slice(&ranges));
         let bytes = total as u64 * 4;
-        let scores = self.buffer("scores", bytes, IMAGE);
-        let params = self.uniform(bytemuck::bytes_of(&RansacParams {
-            hypotheses,
-            regions,
-            inlier_distance,
-            max_score_points: MAX_SCORE_POINTS as u32,
-        }));
-        let group = self.bind(&self.ransac, &[&params, &points, &ranges, &scores]);
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut encoder = self.device.create_command_encoder(&Default::default());
         // At most 65535 workgroups per dimension: wrap into y.
@@ -857,12 +894,11 @@ impl Gpu {
             &mut encoder,
             None,
             0,
-            &[(self.ransac.entry("main"), &group, [total.min(65535), total.div_ceil(65535)])],
+            &[(self.ransac.entry("main"), &b.group, [total.min(65535), total.div_ceil(65535)])],
         );
-        let staging = self.buffer("scores read", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
-        encoder.copy_buffer_to_buffer(&scores, 0, &staging, 0, bytes);
+        encoder.copy_buffer_to_buffer(&b.scores, 0, &b.staging, 0, bytes);
         self.submit(encoder, scope)?;
-        self.map(&staging, bytes, |data| bytemuck::cast_slice(data).to_vec())
+        self.map(&b.staging, bytes, |data| bytemuck::cast_slice(data).to_vec())
     }
 }
 

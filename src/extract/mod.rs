@@ -260,7 +260,7 @@ pub fn extract_with(
     let mut lap = stopwatch();
     let depth = depth_metres(frame, intr)?;
     times.upload = lap();
-    let (images, seg, gpu) = match twin {
+    let (images, seg, mut gpu) = match twin {
         Twin::Cpu => {
             let images = cpu::image_stages(&depth, intr, cfg, &mut times, &mut lap);
             let seg = Segmentation::components(&images.boundary, MIN_REGION_PIXELS);
@@ -278,11 +278,11 @@ pub fn extract_with(
             [times.diffusion, times.normals, times.edges, times.regions] = [t.diffusion, t.normals, t.edges, t.regions];
             times.upload += t.upload;
             times.readback = (ms - t.upload - t.diffusion - t.normals - t.edges - t.regions).max(0.0);
-            (out.images, seg, Some(&*gpu))
+            (out.images, seg, Some(gpu))
         }
     };
     let (hyp, dist) = (cfg.ransac_hypotheses, cfg.ransac_inlier_distance_m as f32);
-    let fit = |batch: &PointBatch| match gpu {
+    let fit = |batch: &PointBatch| match gpu.as_deref_mut() {
         None => Ok(cpu::ransac::fit_planes(batch, hyp, dist)),
         Some(gpu) => Ok(cpu::ransac::fits_from_scores(batch, &gpu.score_hypotheses(batch, hyp, dist)?, hyp, dist)),
     };

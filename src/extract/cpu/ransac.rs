@@ -225,6 +225,52 @@ mod tests {
     use super::*;
 
     #[test]
+    fn refit_is_the_least_squares_plane_of_the_inliers_and_counts_their_support() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        // A plane 2 m away with 1 mm noise, a tenth of its points 5 cm off, and sizes that
+        // leave every remainder of the lanes; the first points are outliers.
+        let (n, d) = (Vector3::new(0.1, -0.8, -0.6).normalize(), 2.0);
+        let (e1, e2) = (n.cross(&Vector3::x()).normalize(), n.cross(&n.cross(&Vector3::x()).normalize()));
+        for size in [3usize, 4, 5, 7, 1001, 20_003] {
+            let points: Vec<[f32; 3]> = (0..size)
+                .map(|i| {
+                    let off = if i < 2 || i % 10 == 3 { 0.05 } else { rng.random_range(-0.001..0.001) };
+                    let p = -n * d + e1 * rng.random_range(-0.5..0.5) + e2 * rng.random_range(-0.5..0.5) + n * off;
+                    [p.x as f32, p.y as f32, p.z as f32]
+                })
+                .collect();
+            let (nf, df) = ([n.x as f32, n.y as f32, n.z as f32], d as f32);
+            let fit = refit(&points, nf, df, 0.01);
+            // The plain definition: the inliers' centroid and smallest scatter direction.
+            let v = |p: &[f32; 3]| Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            let inliers: Vec<Vector3<f64>> =
+                points.iter().filter(|p| (v(p).cast::<f32>().dot(&n.cast::<f32>()) + df).abs() < 0.01).map(v).collect();
+            if inliers.len() < 3 {
+                assert!(fit.is_none(), "size {size}");
+                continue;
+            }
+            let fit = fit.expect("enough inliers");
+            let c = inliers.iter().sum::<Vector3<f64>>() / inliers.len() as f64;
+            let scatter = inliers.iter().map(|p| (p - c) * (p - c).transpose()).sum::<Matrix3<f64>>();
+            let eig = SymmetricEigen::new(scatter);
+            let mut want: Vector3<f64> = eig.eigenvectors.column(eig.eigenvalues.imin()).into();
+            if want.dot(&c) > 0.0 {
+                want = -want;
+            }
+            assert!((fit.normal - want).norm() < 1e-9, "size {size}: {} vs {want}", fit.normal);
+            assert!((fit.offset + want.dot(&c)).abs() < 1e-9, "size {size}");
+            let distances: Vec<f64> = points.iter().map(|p| (fit.normal.dot(&v(p)) + fit.offset).abs()).collect();
+            let support: Vec<f64> = distances.iter().copied().filter(|&e| e < 0.01).collect();
+            assert_eq!(fit.inliers, support.len(), "size {size}");
+            assert_eq!(fit.points, size);
+            let rms = (support.iter().map(|e| e * e).sum::<f64>() / support.len() as f64).sqrt();
+            assert!((fit.rms - rms).abs() < 1e-12, "size {size}: rms {} vs {rms}", fit.rms);
+        }
+        assert!(refit(&[[0.0, 0.0, 5.0]; 10], [0.0, 0.0, -1.0], 1.0, 0.01).is_none(), "no inliers, no plane");
+    }
+
+    #[test]
     fn fast_scores_are_the_oracle() {
         // Regions of 2, 3, 500 and 5000 points (strided above MAX_SCORE_POINTS): a noisy
         // plane with a tenth of its points off it, and (nearly) collinear points in one.
