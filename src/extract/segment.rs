@@ -163,29 +163,48 @@ impl Segmentation {
     pub fn grow(&mut self, fits: &[Option<PlaneFit>], accepted: &[bool], cloud: &Cloud, dist: f32, waves: u32) {
         let (w, h) = (self.labels.width, self.labels.height);
         let nearby = NearbyRegions::new(self, accepted, (NEARBY_PER_WAVE * waves) as usize);
-        let neighbours = |i: usize| {
-            let (u, v) = (i % w, i / w);
-            [(u > 0).then(|| i - 1), (u + 1 < w).then(|| i + 1), (v > 0).then(|| i - w), (v + 1 < h).then(|| i + w)]
-                .into_iter()
-                .flatten()
+        // Pixels go by (u, v) packed as v << 16 | u (ordered as their indices; Intrinsics
+        // hold images to 8192 a side): an index per pixel would cost two divisions to find
+        // its neighbours and cell, most of the growth's time.
+        let pack = |(u, v): (usize, usize)| (v << 16 | u) as u32;
+        let unpack = |c: u32| ((c & 0xffff) as usize, (c >> 16) as usize);
+        let neighbours = |(u, v): (usize, usize)| {
+            [
+                (u > 0).then(|| (u - 1, v)),
+                (u + 1 < w).then(|| (u + 1, v)),
+                (v > 0).then(|| (u, v - 1)),
+                (v + 1 < h).then(|| (u, v + 1)),
+            ]
+            .into_iter()
+            .flatten()
         };
-        // A pixel that did not join in one wave can only join in the next through a
-        // neighbour that did: after the first, each wave looks at those pixels only.
-        let mut candidates: Vec<u32> = (0..(w * h) as u32).filter(|&i| self.labels.data[i as usize] == 0).collect();
+        let label_at = |labels: &[u32], (u, v): (usize, usize)| labels[v * w + u];
+        // The first wave's candidates: unlabelled pixels beside a labelled one. A pixel that
+        // did not join in one wave can only join in the next through a neighbour that did:
+        // after the first, each wave looks at those pixels only.
+        let mut candidates: Vec<u32> = Vec::new();
+        for v in 0..h {
+            for u in 0..w {
+                let labels = &self.labels.data;
+                if labels[v * w + u] == 0 && neighbours((u, v)).any(|q| label_at(labels, q) != 0) {
+                    candidates.push(pack((u, v)));
+                }
+            }
+        }
         let mut queued = vec![false; w * h];
         for _ in 0..waves {
             let labels = &self.labels.data;
             let joins: Vec<(u32, u32)> = candidates
                 .par_iter()
                 .with_min_len(256)
-                .filter_map(|&i| {
-                    let i = i as usize;
-                    if !neighbours(i).any(|j| labels[j] != 0) {
+                .filter_map(|&c| {
+                    let (u, v) = unpack(c);
+                    if !neighbours((u, v)).any(|q| label_at(labels, q) != 0) {
                         return None;
                     }
-                    let p = cloud.point(i)?;
+                    let p = cloud.point(v * w + u)?;
                     let mut best: Option<(f64, u32)> = None;
-                    for &l in nearby.around(i % w, i / w) {
+                    for &l in nearby.around(u, v) {
                         let Some(fit) = &fits[l as usize - 1] else { continue };
                         let e = fit.distance(&p);
                         if e < dist as f64 && best.is_none_or(|(b, bl)| e < b || (e == b && l < bl)) {
@@ -193,24 +212,29 @@ impl Segmentation {
                         }
                     }
                     let (_, l) = best?;
-                    neighbours(i).any(|j| labels[j] == l).then_some((i as u32, l))
+                    neighbours((u, v)).any(|q| label_at(labels, q) == l).then_some((c, l))
                 })
                 .collect();
             if joins.is_empty() {
                 break;
             }
-            for &(i, l) in &joins {
-                self.labels.data[i as usize] = l;
+            for &(c, l) in &joins {
+                let (u, v) = unpack(c);
+                self.labels.data[v * w + u] = l;
             }
             candidates.clear();
-            for &(i, _) in &joins {
-                for j in neighbours(i as usize) {
+            for &(c, _) in &joins {
+                for (u, v) in neighbours(unpack(c)) {
+                    let j = v * w + u;
                     if self.labels.data[j] == 0 && !std::mem::replace(&mut queued[j], true) {
-                        candidates.push(j as u32);
+                        candidates.push(pack((u, v)));
                     }
                 }
             }
-            candidates.iter().for_each(|&j| queued[j as usize] = false);
+            for &c in &candidates {
+                let (u, v) = unpack(c);
+                queued[v * w + u] = false;
+            }
             candidates.sort_unstable();
         }
         self.pixels_from_labels();
@@ -469,12 +493,24 @@ impl NearbyRegions {
     }
 }
 
-/// [u_min, v_min, u_max, v_max] of a non-empty list of pixel indices in an image `w` wide.
+/// [u_min, v_min, u_max, v_max] of a non-empty, ascending list of pixel indices in an
+/// image `w` wide. The rows are the first pixel's and the last's; each pixel's column comes
+/// from the row it is on, stepped along (a division per row, not per pixel: a division per
+/// pixel was most of the growth's time).
 pub fn bounding_box(pixels: &[u32], w: usize) -> [usize; 4] {
-    pixels.iter().fold([usize::MAX, usize::MAX, 0, 0], |[u0, v0, u1, v1], &i| {
-        let (u, v) = (i as usize % w, i as usize / w);
-        [u0.min(u), v0.min(v), u1.max(u), v1.max(v)]
-    })
+    debug_assert!(pixels.windows(2).all(|p| p[0] < p[1]), "ascending pixels");
+    let (first, last) = (pixels[0] as usize, pixels[pixels.len() - 1] as usize);
+    let mut row_start = first / w * w;
+    let (mut u0, mut u1) = (usize::MAX, 0);
+    for &i in pixels {
+        let i = i as usize;
+        if i >= row_start + w {
+            row_start = i / w * w;
+        }
+        u0 = u0.min(i - row_start);
+        u1 = u1.max(i - row_start);
+    }
+    [u0, first / w, u1, last / w]
 }
 
 impl PlaneFit {
