@@ -115,25 +115,20 @@ pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut [i32]) -> Vec<B
     // number in the paper); -n = passed by it with its east neighbour, background, seen.
     let w = shape.width;
     let mut borders: Vec<Border> = Vec::new();
-    // The row and where it starts, updated as the pixels move on to another (a division
-    // per row, not per pixel: it was most of the scan's time).
-    let (mut y, mut row_start) = (usize::MAX, 0);
     let mut parent_number = 1;
-    for (k, &i) in pixels.iter().enumerate() {
-        let i = i as usize;
-        if y == usize::MAX || i >= row_start + w {
-            (y, parent_number) = (i / w, 1);
-            row_start = y * w;
-        }
-        let x = i - row_start;
-        // The west and east neighbours are the shape's when they are the list's neighbours.
-        let west_in = x > 0 && k > 0 && pixels[k - 1] as usize == i - 1;
-        let east_in = x + 1 < w && pixels.get(k + 1).is_some_and(|&j| j as usize == i + 1);
+    // One pixel of the scan: a border may start there (its west or east neighbour is
+    // background), and the last border passed is the parent of the next one on the row.
+    let mut visit = |i: usize,
+                     (x, y): (usize, usize),
+                     west_in: bool,
+                     east_in: bool,
+                     marks: &mut [i32],
+                     parent_number: &mut usize| {
         let start = if marks[i] == 0 && !west_in {
             Some((WEST, BorderKind::Outer))
         } else if marks[i] >= 0 && !east_in {
             if marks[i] > 1 {
-                parent_number = marks[i] as usize;
+                *parent_number = marks[i] as usize;
             }
             Some((EAST, BorderKind::Hole))
         } else {
@@ -141,8 +136,8 @@ pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut [i32]) -> Vec<B
         };
         if let Some((from, kind)) = start {
             let number = borders.len() as i32 + 2;
-            let parent = (parent_number > 1).then(|| {
-                let p = parent_number - 2;
+            let parent = (*parent_number > 1).then(|| {
+                let p = *parent_number - 2;
                 if (kind == BorderKind::Outer) ^ (borders[p].kind == BorderKind::Outer) {
                     Some(p)
                 } else {
@@ -153,8 +148,34 @@ pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut [i32]) -> Vec<B
             borders.push(Border { points, kind, parent: parent.flatten() });
         }
         if marks[i] != 0 {
-            parent_number = marks[i].unsigned_abs() as usize;
+            *parent_number = marks[i].unsigned_abs() as usize;
         }
+    };
+    // Run by run along the rows: only a run's ends can start a border (inside it both
+    // neighbours are the shape's), so its inside is only looked at for the last border
+    // that passed it. A division per row, none per pixel.
+    let (mut y, mut row_start) = (usize::MAX, 0);
+    let mut k = 0;
+    while k < pixels.len() {
+        let first = pixels[k] as usize;
+        if y == usize::MAX || first >= row_start + w {
+            (y, row_start) = (first / w, first / w * w);
+            parent_number = 1;
+        }
+        let mut end = k + 1;
+        while end < pixels.len() && pixels[end] as usize == first + (end - k) && (pixels[end] as usize) < row_start + w
+        {
+            end += 1;
+        }
+        let last = first + (end - k) - 1;
+        visit(first, (first - row_start, y), false, last > first, marks, &mut parent_number);
+        if last > first {
+            if let Some(&m) = marks[first + 1..last].iter().rev().find(|&&m| m != 0) {
+                parent_number = m.unsigned_abs() as usize;
+            }
+            visit(last, (last - row_start, y), true, false, marks, &mut parent_number);
+        }
+        k = end;
     }
     for b in &borders {
         for p in &b.points {
