@@ -681,6 +681,29 @@ fn pieces_of_one_plane_cut_apart_by_dropouts_are_joined_into_one_region_and_noth
     assert_eq!(joins, 0);
 }
 
+#[test]
+fn pieces_of_one_plane_cut_apart_across_the_rows_are_bridged_down_the_columns() {
+    use polymap::extract::segment::Segmentation;
+    use polymap::grid::label_components;
+    // A wall strip 12 wide and 160 tall, rows 70..76 boundary and 71..75 without depth:
+    // the pieces above and below face each other down the columns only.
+    let (w, h) = (12usize, 160usize);
+    let i = intr(w as u32, h as u32);
+    let mut depth = plane_depth(&i, Vector3::new(0.1, 0.0, -1.0).normalize(), 1.2);
+    depth.data[71 * w..75 * w].fill(0.0);
+    let boundary =
+        Grid { width: w, height: h, data: (0..w * h).map(|k| u8::from((70..76).contains(&(k / w)))).collect() };
+    let mut seg = Segmentation::components(&boundary, 30);
+    assert_eq!(seg.pixels.len(), 2);
+    let cloud = Cloud::new(&depth, &i);
+    let mut fits = ransac::fit_planes(&seg.points(&[0, 1], &cloud), 64, 0.01);
+    assert_eq!(seg.join_coplanar(&mut fits, &cloud, 0.03, 0.01, 0.9), 1);
+    let inside: Vec<bool> = seg.labels.data.iter().map(|&l| l == 1).collect();
+    assert_eq!(label_components(&inside, w, h).1, 1, "one connected region");
+    assert_eq!(seg.pixels[0].len(), w * h, "both pieces and the bridged rows");
+    assert!(seg.pixels[0].windows(2).all(|p| p[0] < p[1]), "pixels ascending");
+}
+
 /// Regions of a `w` x `h` strip cut by boundary columns `cuts` (each 6 wide, the middle
 /// four without depth), fitted and joined; `depth_of(column)` picks each column's plane.
 fn join_strip(

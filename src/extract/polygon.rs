@@ -3,6 +3,7 @@
 //! vertices pulled in, cuts at neighbour planes, small ones dropped).
 
 use nalgebra::{Isometry3, Point3, Vector3};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::cloud::Cloud;
@@ -187,9 +188,9 @@ pub fn build_polygons(
     // normal too uncertain to stand on, not two surfaces fitted as one). A plane that
     // fails is held back, not refitted: its pixels do not hold a better one.
     let keep: Vec<bool> = out
-        .iter_mut()
-        .zip(&plane_fits)
-        .zip(&points)
+        .par_iter_mut()
+        .zip(plane_fits.par_iter())
+        .zip(points.par_iter())
         .map(|((p, fit), pts)| {
             if p.area < cfg.min_polygon_area_m2 {
                 return false;

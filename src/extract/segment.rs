@@ -105,6 +105,9 @@ impl Segmentation {
     ) -> Vec<usize> {
         let (w, h) = (self.labels.width, self.labels.height);
         let mut new_regions = Vec::new();
+        // Pixels flooded so far; a flood stays inside one region's pixels, which are
+        // unmarked again after each use (a whole image cleared per region cost more).
+        let mut seen = vec![false; w * h];
         for r in 0..self.pixels.len() {
             let Some(fit) = fits[r] else { continue };
             if fit.inlier_ratio() >= min_ratio {
@@ -114,7 +117,6 @@ impl Segmentation {
             let inlier = |i: usize| {
                 self.labels.data[i] == label && cloud.point(i).is_some_and(|p| fit.distance(&p) < dist as f64)
             };
-            let mut seen = vec![false; w * h];
             let mut best: Vec<u32> = Vec::new();
             for &i in &self.pixels[r] {
                 if !seen[i as usize] && inlier(i as usize) {
@@ -135,7 +137,7 @@ impl Segmentation {
             }
             self.pixels[r] = best;
             fits[r] = refit(&self.points_of(r, cloud), fit.normal_f32(), fit.offset as f32, dist);
-            let mut seen = vec![false; w * h];
+            old.iter().for_each(|&i| seen[i as usize] = false);
             for &i in &old {
                 let i = i as usize;
                 if self.labels.data[i] == 0 && !seen[i] {
@@ -148,6 +150,7 @@ impl Segmentation {
                     }
                 }
             }
+            old.iter().for_each(|&i| seen[i as usize] = false);
         }
         new_regions
     }
@@ -183,10 +186,17 @@ impl Segmentation {
         // did not join in one wave can only join in the next through a neighbour that did:
         // after the first, each wave looks at those pixels only.
         let mut candidates: Vec<u32> = Vec::new();
+        let labels = &self.labels.data;
         for v in 0..h {
+            let row = &labels[v * w..(v + 1) * w];
+            let (up, down) = ((v > 0).then(|| &labels[(v - 1) * w..v * w]), labels.get((v + 1) * w..(v + 2) * w));
             for u in 0..w {
-                let labels = &self.labels.data;
-                if labels[v * w + u] == 0 && neighbours((u, v)).any(|q| label_at(labels, q) != 0) {
+                if row[u] == 0
+                    && ((u > 0 && row[u - 1] != 0)
+                        || (u + 1 < w && row[u + 1] != 0)
+                        || up.is_some_and(|r| r[u] != 0)
+                        || down.is_some_and(|r| r[u] != 0))
+                {
                     candidates.push(pack((u, v)));
                 }
             }
@@ -235,7 +245,6 @@ impl Segmentation {
                 let (u, v) = unpack(c);
                 queued[v * w + u] = false;
             }
-            candidates.sort_unstable();
         }
         self.pixels_from_labels();
     }
@@ -398,32 +407,60 @@ impl Segmentation {
     /// on the region's plane: the pieces a join united become one connected region (an
     /// outline is traced around one connected region).
     fn bridge(&mut self, regions: &[bool], fits: &[Option<PlaneFit>], cloud: &Cloud, dist: f32) {
-        let (w, h) = (self.labels.width, self.labels.height);
+        let w = self.labels.width;
+        let labels = &self.labels.data;
+        // Each united region is scanned inside its bounding box only (a gap between two of
+        // its pixels lies there), row by row; columns keep their last labelled pixel each,
+        // so they too are read along the rows.
+        let united: Vec<(u32, &PlaneFit, [usize; 4])> = (0..regions.len())
+            .filter(|&r| regions[r] && !self.pixels[r].is_empty())
+            .filter_map(|r| Some((r as u32 + 1, fits[r].as_ref()?, bounding_box(&self.pixels[r], w))))
+            .collect();
         let mut fills: Vec<(u32, u32)> = Vec::new();
-        // Rows (pixels 1 apart, rows w apart), then columns (pixels w apart, columns 1 apart).
-        for (step, line_step, lines, len) in [(1, w, h, w), (w, 1, w, h)] {
-            for k in 0..lines {
-                let at = |t: usize| k * line_step + t * step;
+        // The pixels strictly between the labelled t0 and t of a line (pixel `at(t)`),
+        // both of `label` with nothing labelled between: filled if a short gap on the plane.
+        let mut gap = |t0: usize, t: usize, at: &dyn Fn(usize) -> usize, label: u32, fit: &PlaneFit| {
+            if t - t0 > 1 && t - t0 <= JOIN_GAP_PX + 1 {
+                let on_plane = |t: usize| cloud.point(at(t)).is_none_or(|p| fit.distance(&p) < dist as f64);
+                if (t0 + 1..t).all(on_plane) {
+                    fills.extend((t0 + 1..t).map(|t| (at(t) as u32, label)));
+                }
+            }
+        };
+        // Rows first, then columns: where a gap is both, the row's fill is the one kept.
+        for &(label, fit, [u0, v0, u1, v1]) in &united {
+            for v in v0..=v1 {
                 let mut last: Option<(usize, u32)> = None;
-                for t in 0..len {
-                    let l = self.labels.data[at(t)];
+                for u in u0..=u1 {
+                    let l = labels[v * w + u];
                     if l == 0 {
                         continue;
                     }
                     if let Some((t0, l0)) = last
-                        && l0 == l
-                        && t - t0 > 1
-                        && t - t0 <= JOIN_GAP_PX + 1
-                        && regions[l as usize - 1]
-                        && let Some(fit) = &fits[l as usize - 1]
+                        && l0 == label
+                        && l == label
                     {
-                        let gap = (t0 + 1..t).map(at);
-                        let on_plane = |i: usize| cloud.point(i).is_none_or(|p| fit.distance(&p) < dist as f64);
-                        if gap.clone().all(on_plane) {
-                            fills.extend(gap.map(|i| (i as u32, l)));
-                        }
+                        gap(t0, u, &|t| v * w + t, label, fit);
                     }
-                    last = Some((t, l));
+                    last = Some((u, l));
+                }
+            }
+        }
+        for &(label, fit, [u0, v0, u1, v1]) in &united {
+            let mut last: Vec<Option<(usize, u32)>> = vec![None; u1 - u0 + 1];
+            for v in v0..=v1 {
+                for u in u0..=u1 {
+                    let l = labels[v * w + u];
+                    if l == 0 {
+                        continue;
+                    }
+                    if let Some((t0, l0)) = last[u - u0]
+                        && l0 == label
+                        && l == label
+                    {
+                        gap(t0, v, &|t| t * w + u, label, fit);
+                    }
+                    last[u - u0] = Some((v, l));
                 }
             }
         }

@@ -88,33 +88,34 @@ fn depth_steps(row: &[f32], above: &[f32], below: &[f32], out: &mut [u8], ratio:
 /// image counts as edge, so closing never eats into the border.
 pub fn close(edges: &Grid<u8>, size: u32) -> Grid<u8> {
     let r = (size / 2) as usize;
-    let dilated = dilate(edges, r, 1);
-    let inverted =
-        Grid { width: dilated.width, height: dilated.height, data: dilated.data.iter().map(|&e| 1 - e).collect() };
-    let eroded_inv = dilate(&inverted, r, 0);
-    Grid { width: edges.width, height: edges.height, data: eroded_inv.data.iter().map(|&e| 1 - e).collect() }
+    square::<true>(&square::<false>(edges, r, 1), r, 1)
 }
 
-/// Binary dilation by a (2r+1)^2 square, separable: each row is the OR of its 2r + 1
-/// shifted copies, then each row the OR of the 2r + 1 rows around it (whole rows at
-/// a time, so both passes vectorise). `outside` is the value of pixels beyond the border.
-pub fn dilate(mask: &Grid<u8>, r: usize, outside: u8) -> Grid<u8> {
+/// Binary dilation (any pixel of the square set) or, with `ALL`, erosion (every pixel of
+/// it set) of a 0/1 mask by a (2r+1)^2 square, separable: each row is the OR (AND) of its
+/// 2r + 1 shifted copies, then each row that of the 2r + 1 rows around it (whole rows at a
+/// time, so both passes vectorise). `outside` is the value of pixels beyond the border.
+fn square<const ALL: bool>(mask: &Grid<u8>, r: usize, outside: u8) -> Grid<u8> {
     let (w, h) = (mask.width, mask.height);
-    let mut rows = vec![0u8; w * h];
-    rows.par_chunks_mut(w).zip(mask.data.par_chunks(w)).with_min_len(16).for_each(|(out, src)| {
-        let mut padded = vec![outside; w + 2 * r];
-        padded[r..r + w].copy_from_slice(src);
-        for k in 0..=2 * r {
-            out.iter_mut().zip(&padded[k..k + w]).for_each(|(o, &p)| *o |= p);
-        }
-    });
-    let mut data = vec![0u8; w * h];
+    let combine = |o: &mut u8, p: u8| if ALL { *o &= p } else { *o |= p };
+    let identity = u8::from(ALL);
+    let mut rows = vec![identity; w * h];
+    rows.par_chunks_mut(w).zip(mask.data.par_chunks(w)).with_min_len(16).for_each_init(
+        || vec![outside; w + 2 * r],
+        |padded, (out, src)| {
+            padded[r..r + w].copy_from_slice(src);
+            for k in 0..=2 * r {
+                out.iter_mut().zip(&padded[k..k + w]).for_each(|(o, &p)| combine(o, p));
+            }
+        },
+    );
+    let mut data = vec![identity; w * h];
     data.par_chunks_mut(w).enumerate().with_min_len(16).for_each(|(v, out)| {
         if v < r || v + r >= h {
-            out.fill(outside);
+            out.iter_mut().for_each(|o| combine(o, outside));
         }
         for j in v.saturating_sub(r)..(v + r + 1).min(h) {
-            out.iter_mut().zip(&rows[j * w..(j + 1) * w]).for_each(|(o, &p)| *o |= p);
+            out.iter_mut().zip(&rows[j * w..(j + 1) * w]).for_each(|(o, &p)| combine(o, p));
         }
     });
     Grid { width: w, height: h, data }
@@ -261,7 +262,10 @@ mod tests {
             let [rows, columns, ..] = closing_passes(w as u32, h as u32, size);
             let each = |f: &dyn Fn(usize) -> u8| (0..w * h).map(f).collect::<Vec<u8>>();
             let by_rows = each(&|i| morphology_at(&rows, &mask.data, i));
-            assert_eq!(dilate(&mask, size as usize / 2, 1).data, each(&|i| morphology_at(&columns, &by_rows, i)));
+            assert_eq!(
+                square::<false>(&mask, size as usize / 2, 1).data,
+                each(&|i| morphology_at(&columns, &by_rows, i))
+            );
             let mut closed = mask.data.clone();
             for pass in closing_passes(w as u32, h as u32, size) {
                 closed = each(&|i| morphology_at(&pass, &closed, i));

@@ -56,9 +56,13 @@ pub fn diffuse(depth: &Grid<f32>, time: f32, steps: u32, kappa: f32) -> Grid<f32
     }
     let step = time / steps as f32;
     let inv_kappa = 1.0 / kappa;
+    // The column pass cannot write where it reads (other stripes still read those rows):
+    // it writes this second image, and the two swap.
+    let mut next = u.clone();
     for _ in 0..steps {
         solve_rows(&mut u, step, inv_kappa);
-        solve_columns(&mut u, step, inv_kappa);
+        solve_columns(&u, &mut next, step, inv_kappa);
+        std::mem::swap(&mut u, &mut next);
     }
     u
 }
@@ -67,47 +71,81 @@ pub fn diffuse(depth: &Grid<f32>, time: f32, steps: u32, kappa: f32) -> Grid<f32
 /// times over, few enough that a 320-wide image still splits into tasks for threads.
 const LANES: usize = 64;
 
+thread_local! {
+    /// A pass's working arrays (the transposed band, the elimination's factors, the
+    /// changes), kept by each thread from frame to frame: allocating and zeroing them
+    /// for every band of every pass cost as much as a sixth of the solve.
+    static SCRATCH: std::cell::RefCell<[Vec<f32>; 3]> = const { std::cell::RefCell::new([Vec::new(), Vec::new(), Vec::new()]) };
+}
+
+/// Runs `f` on this thread's three scratch arrays, each at least `len` long (their
+/// contents are left from earlier passes: `solve_down` writes before it reads).
+fn with_scratch<R>(len: usize, f: impl FnOnce(&mut [f32], &mut [f32], &mut [f32]) -> R) -> R {
+    SCRATCH.with_borrow_mut(|[a, b, c]| {
+        for v in [&mut *a, &mut *b, &mut *c] {
+            if v.len() < len {
+                v.resize(len, 0.0);
+            }
+        }
+        f(&mut a[..len], &mut b[..len], &mut c[..len])
+    })
+}
+
 /// The row pass, in place (on a non-empty image). Rows are solved LANES at a time: each
 /// band is transposed so its rows run down a block and its pixels of one column lie side by side.
 fn solve_rows(u: &mut Grid<f32>, step: f32, inv_kappa: f32) {
     let w = u.width;
     u.data.par_chunks_mut(w * LANES).for_each(|band| {
         let lanes = band.len() / w;
-        let mut block = vec![0.0f32; w * lanes];
-        for (k, row) in band.chunks_exact(w).enumerate() {
-            for (x, &z) in row.iter().enumerate() {
-                block[x * lanes + k] = z;
+        with_scratch(w * lanes, |block, e, out| {
+            for (k, row) in band.chunks_exact(w).enumerate() {
+                for (x, &z) in row.iter().enumerate() {
+                    block[x * lanes + k] = z;
+                }
             }
-        }
-        let (mut e, mut out) = (vec![0.0f32; w * lanes], vec![0.0f32; w * lanes]);
-        solve_down(&block, lanes, lanes, step, inv_kappa, &mut e, &mut out);
-        for (k, row) in band.chunks_exact_mut(w).enumerate() {
-            for (x, z) in row.iter_mut().enumerate() {
-                *z = out[x * lanes + k];
+            solve_down(block, lanes, lanes, step, inv_kappa, e, out);
+            for (k, row) in band.chunks_exact_mut(w).enumerate() {
+                for (x, z) in row.iter_mut().enumerate() {
+                    *z = out[x * lanes + k];
+                }
             }
-        }
+        })
     });
 }
 
-/// The column pass, in place (on a non-empty image): stripes of LANES columns, read where they lie.
-fn solve_columns(u: &mut Grid<f32>, step: f32, inv_kappa: f32) {
+/// The column pass from `u` into `next` (same size, non-empty): stripes of LANES
+/// columns, read where they lie, each written by the task that solved it.
+fn solve_columns(u: &Grid<f32>, next: &mut Grid<f32>, step: f32, inv_kappa: f32) {
     let (w, h) = (u.width, u.height);
-    let src = &u.data;
-    let stripes: Vec<(usize, Vec<f32>)> = (0..w.div_ceil(LANES))
-        .into_par_iter()
-        .map(|k| {
-            let x0 = k * LANES;
-            let lanes = LANES.min(w - x0);
-            let (mut e, mut out) = (vec![0.0f32; h * lanes], vec![0.0f32; h * lanes]);
-            solve_down(&src[x0..], w, lanes, step, inv_kappa, &mut e, &mut out);
-            (x0, out)
+    let dst = StripeWriter(next.data.as_mut_ptr());
+    (0..w.div_ceil(LANES)).into_par_iter().for_each(|k| {
+        let x0 = k * LANES;
+        let lanes = LANES.min(w - x0);
+        with_scratch(h * lanes, |_, e, out| {
+            solve_down(&u.data[x0..], w, lanes, step, inv_kappa, e, out);
+            for (y, line) in out.chunks_exact(lanes).enumerate() {
+                // SAFETY: `next` holds w * h values and outlives the pass; this task alone
+                // writes columns x0..x0 + lanes (the stripes are disjoint), and nothing
+                // reads `next` until the pass is over.
+                unsafe { dst.write(y * w + x0, line) };
+            }
         })
-        .collect();
-    for (x0, out) in stripes {
-        let lanes = out.len() / h;
-        for (y, line) in out.chunks_exact(lanes).enumerate() {
-            u.data[y * w + x0..y * w + x0 + lanes].copy_from_slice(line);
-        }
+    });
+}
+
+/// The pointer through which the column pass's tasks write their own stripes of one image.
+struct StripeWriter(*mut f32);
+// SAFETY: shared only by `solve_columns`' tasks, which write disjoint columns.
+unsafe impl Sync for StripeWriter {}
+
+impl StripeWriter {
+    /// Copies `values` to the image from index `at` on.
+    ///
+    /// # Safety
+    /// `at + values.len()` is within the image, and no other thread touches those values meanwhile.
+    unsafe fn write(&self, at: usize, values: &[f32]) {
+        // SAFETY: as the caller promises.
+        unsafe { std::ptr::copy_nonoverlapping(values.as_ptr(), self.0.add(at), values.len()) }
     }
 }
 
