@@ -9,6 +9,45 @@ pub struct Grid<T> {
     pub data: Vec<T>,
 }
 
+/// A stretch of consecutive pixels along row `v`: indices `first..=last`, the row
+/// starting at index `row_start`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Run {
+    pub v: usize,
+    pub row_start: usize,
+    pub first: usize,
+    pub last: usize,
+}
+
+impl Run {
+    /// The columns of its first and last pixel.
+    pub fn columns(&self) -> (usize, usize) {
+        (self.first - self.row_start, self.last - self.row_start)
+    }
+}
+
+/// The runs of an ascending list of pixel indices in an image `w` wide, in order. A
+/// division per row, none per pixel: per pixel, it was most of the time of the loops
+/// that walk a region's pixels by row and column.
+pub fn runs(pixels: &[u32], w: usize) -> impl Iterator<Item = Run> + '_ {
+    debug_assert!(pixels.windows(2).all(|p| p[0] < p[1]), "ascending pixels");
+    let (mut k, mut v, mut row_start) = (0, usize::MAX, 0);
+    std::iter::from_fn(move || {
+        let first = *pixels.get(k)? as usize;
+        if v == usize::MAX || first >= row_start + w {
+            (v, row_start) = (first / w, first / w * w);
+        }
+        let mut end = k + 1;
+        while end < pixels.len() && pixels[end] as usize == first + (end - k) && (pixels[end] as usize) < row_start + w
+        {
+            end += 1;
+        }
+        let last = first + (end - k) - 1;
+        k = end;
+        Some(Run { v, row_start, first, last })
+    })
+}
+
 /// The 8-connected set of pixels reachable from `start` through pixels where `inside`
 /// holds, marking them in `seen`.
 pub fn flood(start: usize, w: usize, h: usize, seen: &mut [bool], inside: impl Fn(usize) -> bool) -> Vec<u32> {
@@ -95,4 +134,33 @@ pub fn label_components(inside: &[bool], w: usize, h: usize) -> (Vec<u32>, usize
         labels[v * w + s..v * w + e].fill(label_of_root[r]);
     }
     (labels, count)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn runs_are_the_stretches_of_consecutive_pixels_within_each_row() {
+        // Every 7th hash-picked pixel of a 13-wide image: runs that end at a row's end and
+        // go on at the next row's start must split there.
+        let (w, h) = (13usize, 11usize);
+        let pixels: Vec<u32> =
+            (0..(w * h) as u32).filter(|&i| !crate::extract::cpu::ransac::hash(i).is_multiple_of(7)).collect();
+        let got: Vec<Run> = runs(&pixels, w).collect();
+        let mut want: Vec<Run> = Vec::new();
+        for &i in &pixels {
+            let (i, v) = (i as usize, i as usize / w);
+            match want.last_mut() {
+                Some(r) if r.v == v && r.last + 1 == i => r.last = i,
+                _ => want.push(Run { v, row_start: v * w, first: i, last: i }),
+            }
+        }
+        assert_eq!(got, want);
+        assert!(
+            got.windows(2).any(|p| p[0].last + 1 == p[1].first && p[0].columns().1 == w - 1),
+            "the pixels hold a stretch across a row's end, split there"
+        );
+        assert_eq!(runs(&[], w).count(), 0);
+    }
 }

@@ -13,6 +13,7 @@ use imageproc::point::Point;
 use rayon::prelude::*;
 
 use super::segment::Segmentation;
+use crate::grid::runs;
 
 /// One region: its component label, outline and holes (pixel centres, simplified).
 #[derive(Clone, Debug, PartialEq)]
@@ -153,29 +154,22 @@ pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut [i32]) -> Vec<B
     };
     // Run by run along the rows: only a run's ends can start a border (inside it both
     // neighbours are the shape's), so its inside is only looked at for the last border
-    // that passed it. A division per row, none per pixel.
-    let (mut y, mut row_start) = (usize::MAX, 0);
-    let mut k = 0;
-    while k < pixels.len() {
-        let first = pixels[k] as usize;
-        if y == usize::MAX || first >= row_start + w {
-            (y, row_start) = (first / w, first / w * w);
+    // that passed it.
+    let mut row = usize::MAX;
+    for run in runs(pixels, w) {
+        if run.v != row {
+            row = run.v;
             parent_number = 1;
         }
-        let mut end = k + 1;
-        while end < pixels.len() && pixels[end] as usize == first + (end - k) && (pixels[end] as usize) < row_start + w
-        {
-            end += 1;
-        }
-        let last = first + (end - k) - 1;
-        visit(first, (first - row_start, y), false, last > first, marks, &mut parent_number);
+        let (first, last) = (run.first, run.last);
+        let (u_first, u_last) = run.columns();
+        visit(first, (u_first, run.v), false, last > first, marks, &mut parent_number);
         if last > first {
             if let Some(&m) = marks[first + 1..last].iter().rev().find(|&&m| m != 0) {
                 parent_number = m.unsigned_abs() as usize;
             }
-            visit(last, (last - row_start, y), true, false, marks, &mut parent_number);
+            visit(last, (u_last, run.v), true, false, marks, &mut parent_number);
         }
-        k = end;
     }
     for b in &borders {
         for p in &b.points {

@@ -17,7 +17,7 @@ use rayon::prelude::*;
 use super::Grid;
 use super::cloud::Cloud;
 use super::cpu::ransac::{PlaneFit, PointBatch, refit};
-use crate::grid::{flood, label_components};
+use crate::grid::{flood, label_components, runs};
 
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
 #[derive(Clone, Debug)]
@@ -531,23 +531,14 @@ impl NearbyRegions {
 }
 
 /// [u_min, v_min, u_max, v_max] of a non-empty, ascending list of pixel indices in an
-/// image `w` wide. The rows are the first pixel's and the last's; each pixel's column comes
-/// from the row it is on, stepped along (a division per row, not per pixel: a division per
-/// pixel was most of the growth's time).
+/// image `w` wide, run by run.
 pub fn bounding_box(pixels: &[u32], w: usize) -> [usize; 4] {
-    debug_assert!(pixels.windows(2).all(|p| p[0] < p[1]), "ascending pixels");
-    let (first, last) = (pixels[0] as usize, pixels[pixels.len() - 1] as usize);
-    let mut row_start = first / w * w;
     let (mut u0, mut u1) = (usize::MAX, 0);
-    for &i in pixels {
-        let i = i as usize;
-        if i >= row_start + w {
-            row_start = i / w * w;
-        }
-        u0 = u0.min(i - row_start);
-        u1 = u1.max(i - row_start);
+    for run in runs(pixels, w) {
+        let (a, b) = run.columns();
+        (u0, u1) = (u0.min(a), u1.max(b));
     }
-    [u0, first / w, u1, last / w]
+    [u0, pixels[0] as usize / w, u1, pixels[pixels.len() - 1] as usize / w]
 }
 
 impl PlaneFit {

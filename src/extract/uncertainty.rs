@@ -149,14 +149,20 @@ fn relative_variance(p: &Vector3<f64>, n: &Vector3<f64>) -> f64 {
     (0.5 + 0.5 * r).powi(2) * cos
 }
 
+/// Two unit axes at right angles in the plane of the unit normal `n`: any in-plane axis,
+/// and the one across it; None for a normal too short to have a plane. A plane's
+/// covariance is stored on these axes, and read back on them (map snapshots).
+pub fn in_plane_axes(n: &Vector3<f64>) -> Option<[Vector3<f64>; 2]> {
+    let helper = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+    let e1 = n.cross(&helper).try_normalize(1e-9)?;
+    Some([e1, n.cross(&e1)])
+}
+
 /// The uncertainty of `fit` from the points within `dist` of its plane; None with too few
 /// of them to fix a plane (fewer than 4, or all on a line).
 pub fn plane_uncertainty(points: &[[f32; 3]], fit: &PlaneFit, dist: f64) -> Option<PlaneUncertainty> {
     let n = fit.normal;
-    // Any in-plane axis, and the one across it.
-    let helper = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
-    let e1 = n.cross(&helper).normalize();
-    let e2 = n.cross(&e1);
+    let [e1, e2] = in_plane_axes(&n)?;
     // A large region's sums are those of every k-th point times k, to well under a percent
     // (its points lie on a regular pixel grid): the covariance costs the same for any size.
     let stride = points.len().div_ceil(MAX_POINTS).max(1);

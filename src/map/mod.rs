@@ -27,7 +27,7 @@ use rstar::{AABB, RTree};
 use serde::{Deserialize, Serialize};
 
 use crate::config::MapConfig;
-use crate::extract::uncertainty::PlaneUncertainty;
+use crate::extract::uncertainty::{PlaneUncertainty, in_plane_axes};
 use crate::extract::{Grid, Polygon, VertexKind};
 use crate::types::Intrinsics;
 use drift::DriftFilter;
@@ -1004,17 +1004,12 @@ fn plane_covariance(u: &PlaneUncertainty, normal: &Vector3<f64>, centroid: [f64;
 /// A snapshot polygon's plane uncertainty, from the coefficient covariance it was saved
 /// with (about its centroid, on axes of its plane); unknown if it was saved without.
 fn snapshot_uncertainty(p: &MapPolygon) -> PlaneUncertainty {
-    let n = Vector3::from(p.normal);
-    let helper = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
-    let (Some(e1), true) = (n.cross(&helper).try_normalize(1e-9), p.plane_covariance.iter().all(|c| c.is_finite()))
+    let (Some([e1, e2]), true) =
+        (in_plane_axes(&Vector3::from(p.normal)), p.plane_covariance.iter().all(|c| c.is_finite()))
     else {
         return PlaneUncertainty::default();
     };
-    let u = PlaneUncertainty::from_coefficient_covariance(
-        &p.plane_covariance,
-        p.centroid,
-        [e1.into(), n.cross(&e1).into()],
-    );
+    let u = PlaneUncertainty::from_coefficient_covariance(&p.plane_covariance, p.centroid, [e1.into(), e2.into()]);
     if u.is_known() { u } else { PlaneUncertainty::default() }
 }
 
