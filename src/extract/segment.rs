@@ -53,12 +53,8 @@ impl Segmentation {
                 region_of[l] = pixels.len() as u32;
             }
         }
-        for (i, l) in labels.data.iter_mut().enumerate() {
-            *l = region_of[*l as usize];
-            if *l != 0 {
-                pixels[*l as usize - 1].push(i as u32);
-            }
-        }
+        labels.data.iter_mut().for_each(|l| *l = region_of[*l as usize]);
+        push_pixels(&labels.data, &mut pixels);
         Segmentation { labels, pixels }
     }
 
@@ -253,11 +249,22 @@ impl Segmentation {
     /// construction (cheaper than appending each wave of growth and sorting).
     fn pixels_from_labels(&mut self) {
         self.pixels.iter_mut().for_each(Vec::clear);
-        for (i, &l) in self.labels.data.iter().enumerate() {
-            if l != 0 {
-                self.pixels[l as usize - 1].push(i as u32);
-            }
+        push_pixels(&self.labels.data, &mut self.pixels);
+    }
+}
+
+/// Appends every labelled pixel's index to its region's list (label l: region l - 1),
+/// ascending, a run of one label at a time: labels come in long runs along the rows, and
+/// a run is one contiguous extend where pixel by pixel each push reloaded its list.
+fn push_pixels(labels: &[u32], pixels: &mut [Vec<u32>]) {
+    let mut i = 0;
+    while i < labels.len() {
+        let l = labels[i];
+        let end = i + labels[i..].iter().position(|&x| x != l).unwrap_or(labels.len() - i);
+        if l != 0 {
+            pixels[l as usize - 1].extend(i as u32..end as u32);
         }
+        i = end;
     }
 }
 
