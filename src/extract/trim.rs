@@ -13,6 +13,7 @@
 //! a cut say so ([`VertexKind::Cut`]): the map keeps them where they are.
 
 use nalgebra::Vector3;
+use rayon::prelude::*;
 
 use super::{Polygon, VertexKind};
 use crate::ring::clip_tagged_ring;
@@ -30,11 +31,11 @@ const STRAY_SHARE: f64 = 0.005;
 pub fn trim_at_neighbour_planes(
     polygons: &mut [Polygon],
     points: &[&[[f32; 3]]],
-    meet: impl Fn(usize, usize) -> bool,
+    meet: impl Fn(usize, usize) -> bool + Sync,
     dist: f64,
 ) {
     let planes: Vec<(Vector3<f64>, f64)> = polygons.iter().map(|p| (Vector3::from(p.normal), p.offset)).collect();
-    for (a, polygon) in polygons.iter_mut().enumerate() {
+    polygons.par_iter_mut().enumerate().for_each(|(a, polygon)| {
         let own = planes[a].0;
         for (b, &(n, d)) in planes.iter().enumerate() {
             if b == a || own.dot(&n).abs() > PARALLEL_COS {
@@ -75,5 +76,5 @@ pub fn trim_at_neighbour_planes(
                 .filter(|(h, _)| h.len() >= 3)
                 .unzip();
         }
-    }
+    });
 }
