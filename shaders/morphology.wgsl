@@ -1,5 +1,5 @@
 // One axis of a binary dilation or erosion by a (2r+1)^2 square: the GPU side of
-// cpu::canny::dilate (the oracle `morphology_at` mirrors it). A square is a row pass then
+// cpu::morphology (the oracle `morphology_at` mirrors it). A square is a row pass then
 // a column pass; a closing is a dilation then an erosion, four passes.
 
 // Field by field the Rust struct gpu::MorphologyParams.

@@ -4,7 +4,7 @@
 use nalgebra::Vector3;
 use polymap::config::PipelineConfig;
 use polymap::extract::cloud::Cloud;
-use polymap::extract::cpu::{boundary, canny, diffusion, normals, ransac};
+use polymap::extract::cpu::{canny, diffusion, morphology, normals, ransac};
 use polymap::extract::{ExtractError, Grid, extract_cpu};
 use polymap::synth::{NoiseModel, Scene, SceneKind, noisy_depth, path::trajectory, render};
 use polymap::types::{DepthFrame, Intrinsics};
@@ -201,7 +201,7 @@ fn closing_bridges_gaps_and_keeps_the_border() {
     for u in (0..w).filter(|u| !(12..16).contains(u)) {
         data[10 * w + u] = 1; // a line with a 4-pixel gap
     }
-    let closed = boundary::close(&Grid { width: w, height: h, data: data.clone() }, 7);
+    let closed = morphology::close(&Grid { width: w, height: h, data: data.clone() }, 7);
     assert!((0..w).all(|u| closed.data[10 * w + u] == 1), "the gap is bridged");
     assert_eq!(closed.data.iter().filter(|&&e| e != 0).count(), w, "and nothing else is added");
 }

@@ -9,7 +9,7 @@
 
 use wgpu::util::DeviceExt;
 
-use super::cpu::boundary::closing_passes;
+use super::cpu::morphology::closing_passes;
 use super::cpu::normals::sobel_kernel;
 use super::cpu::ransac::{MAX_SCORE_POINTS, PointBatch};
 use super::{Grid, Images};

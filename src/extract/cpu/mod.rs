@@ -4,6 +4,7 @@ pub mod boundary;
 pub mod canny;
 pub mod components;
 pub mod diffusion;
+pub mod morphology;
 pub mod normals;
 pub mod ransac;
 pub mod separable;

@@ -9,7 +9,7 @@
 
 use rayon::prelude::*;
 
-use super::{ROWS_PER_TASK, separable};
+use super::{ROWS_PER_TASK, morphology, separable};
 use crate::extract::Grid;
 use crate::types::Intrinsics;
 
@@ -32,31 +32,33 @@ pub fn normals(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32) -> Grid<[f32; 
     let (fx, fy, cx, cy) = (intr.fx as f32, intr.fy as f32, intr.cx as f32, intr.cy as f32);
     let z = &depth.data;
     let (zu, zv) = (separable::filter(z, w, h, deriv, smooth), separable::filter(z, w, h, smooth, deriv));
-    let valid: Vec<bool> = z.iter().map(|&z| z != 0.0).collect();
-    let all_valid = separable::window_all_valid(&valid, w, h, r);
+    // Every tap is valid where no invalid pixel, nor the border, is within r: the
+    // invalid pixels dilated by the kernel's square, the outside counting as invalid.
+    let invalid = Grid { width: w, height: h, data: z.iter().map(|&z| u8::from(z == 0.0)).collect() };
+    let spoiled = morphology::dilate(&invalid, r, 1);
     let mut data = vec![[0.0f32; 3]; w * h];
     data.par_chunks_mut(w).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, out)| {
         let row = v * w..(v + 1) * w;
         let camera = [fx, fy, cx, cy, norm, v as f32];
-        normals_row(&z[row.clone()], &zu[row.clone()], &zv[row.clone()], &all_valid[row], out, camera);
+        normals_row(&z[row.clone()], &zu[row.clone()], &zv[row.clone()], &spoiled.data[row], out, camera);
     });
     Grid { width: w, height: h, data }
 }
 
 super::widest_simd! {
     /// One row of normals: `camera` is [fx, fy, cx, cy, the Sobel norm, the row's v].
-    fn normals_row(z: &[f32], zu: &[f32], zv: &[f32], ok: &[bool], out: &mut [[f32; 3]], camera: [f32; 6]) = normals_row_portable
+    fn normals_row(z: &[f32], zu: &[f32], zv: &[f32], spoiled: &[u8], out: &mut [[f32; 3]], camera: [f32; 6]) = normals_row_portable
 }
 
 /// Equal-length slices and a branch-free `surface_normal`: the loop vectorises.
 #[inline(always)]
-fn normals_row_portable(z: &[f32], zu: &[f32], zv: &[f32], ok: &[bool], out: &mut [[f32; 3]], camera: [f32; 6]) {
+fn normals_row_portable(z: &[f32], zu: &[f32], zv: &[f32], spoiled: &[u8], out: &mut [[f32; 3]], camera: [f32; 6]) {
     let [fx, fy, cx, cy, norm, v] = camera;
     let n = out.len();
-    let (z, zu, zv, ok) = (&z[..n], &zu[..n], &zv[..n], &ok[..n]);
+    let (z, zu, zv, spoiled) = (&z[..n], &zu[..n], &zv[..n], &spoiled[..n]);
     for u in 0..n {
         let normal = surface_normal(z[u], zu[u] / norm, zv[u] / norm, u as f32, v, fx, fy, cx, cy);
-        out[u] = if ok[u] { normal } else { [0.0; 3] };
+        out[u] = if spoiled[u] == 0 { normal } else { [0.0; 3] };
     }
 }
 

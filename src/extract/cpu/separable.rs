@@ -58,22 +58,6 @@ fn column_pass_portable(rows: &[f32], out: &mut [f32], w: usize, r: usize, k: &[
     }
 }
 
-/// 1 where every pixel of the (2r+1)^2 window around a pixel at least r from the border
-/// is valid, 0 elsewhere (and within r of the border).
-pub fn window_all_valid(valid: &[bool], w: usize, h: usize, r: usize) -> Vec<bool> {
-    let invalid: Vec<f32> = valid.iter().map(|&v| f32::from(u8::from(!v))).collect();
-    let ones = vec![1.0f32; 2 * r + 1];
-    // Counts of small integers: exact in f32.
-    let bad = filter(&invalid, w, h, &ones, &ones);
-    let mut out = vec![false; w * h];
-    for v in r..h.saturating_sub(r) {
-        for u in r..w.saturating_sub(r) {
-            out[v * w + u] = bad[v * w + u] == 0.0;
-        }
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -95,21 +79,6 @@ mod tests {
                     }
                 }
                 assert_eq!(out[v * w + u], want, "pixel ({u}, {v})");
-            }
-        }
-    }
-
-    #[test]
-    fn window_all_valid_sees_one_invalid_pixel() {
-        let (w, h) = (9, 7);
-        let mut valid = vec![true; w * h];
-        valid[3 * w + 4] = false;
-        let ok = window_all_valid(&valid, w, h, 1);
-        for v in 0..h {
-            for u in 0..w {
-                let inside = (1..w - 1).contains(&u) && (1..h - 1).contains(&v);
-                let near = u.abs_diff(4) <= 1 && v.abs_diff(3) <= 1;
-                assert_eq!(ok[v * w + u], inside && !near, "pixel ({u}, {v})");
             }
         }
     }
