@@ -416,62 +416,53 @@ impl Segmentation {
     fn bridge(&mut self, regions: &[bool], fits: &[Option<PlaneFit>], cloud: &Cloud, dist: f32) {
         let w = self.labels.width;
         let labels = &self.labels.data;
-        // Each united region is scanned inside its bounding box only (a gap between two of
-        // its pixels lies there), row by row; columns keep their last labelled pixel each,
-        // so they too are read along the rows.
+        // Each united region is scanned once, inside its bounding box only (a gap between two
+        // of its pixels lies there), row by row; columns keep their last labelled pixel
+        // each, so they too are read along the rows.
         let united: Vec<(u32, &PlaneFit, [usize; 4])> = (0..regions.len())
             .filter(|&r| regions[r] && !self.pixels[r].is_empty())
             .filter_map(|r| Some((r as u32 + 1, fits[r].as_ref()?, bounding_box(&self.pixels[r], w))))
             .collect();
-        let mut fills: Vec<(u32, u32)> = Vec::new();
         // The pixels strictly between the labelled t0 and t of a line (pixel `at(t)`),
         // both of `label` with nothing labelled between: filled if a short gap on the plane.
-        let mut gap = |t0: usize, t: usize, at: &dyn Fn(usize) -> usize, label: u32, fit: &PlaneFit| {
-            if t - t0 > 1 && t - t0 <= JOIN_GAP_PX + 1 {
-                let on_plane = |t: usize| cloud.point(at(t)).is_none_or(|p| fit.distance(&p) < dist as f64);
-                if (t0 + 1..t).all(on_plane) {
-                    fills.extend((t0 + 1..t).map(|t| (at(t) as u32, label)));
+        let gap =
+            |fills: &mut Vec<(u32, u32)>, t0: usize, t: usize, at: &dyn Fn(usize) -> usize, label, fit: &PlaneFit| {
+                if t - t0 > 1 && t - t0 <= JOIN_GAP_PX + 1 {
+                    let on_plane = |t: usize| cloud.point(at(t)).is_none_or(|p| fit.distance(&p) < dist as f64);
+                    if (t0 + 1..t).all(on_plane) {
+                        fills.extend((t0 + 1..t).map(|t| (at(t) as u32, label)));
+                    }
                 }
-            }
-        };
-        // Rows first, then columns: where a gap is both, the row's fill is the one kept.
+            };
+        let (mut row_fills, mut column_fills) = (Vec::new(), Vec::new());
         for &(label, fit, [u0, v0, u1, v1]) in &united {
+            let mut column_last: Vec<Option<(usize, u32)>> = vec![None; u1 - u0 + 1];
             for v in v0..=v1 {
-                let mut last: Option<(usize, u32)> = None;
+                let mut row_last: Option<(usize, u32)> = None;
                 for u in u0..=u1 {
                     let l = labels[v * w + u];
                     if l == 0 {
                         continue;
                     }
-                    if let Some((t0, l0)) = last
-                        && l0 == label
-                        && l == label
-                    {
-                        gap(t0, u, &|t| v * w + t, label, fit);
+                    if l == label {
+                        if let Some((t0, l0)) = row_last
+                            && l0 == label
+                        {
+                            gap(&mut row_fills, t0, u, &|t| v * w + t, label, fit);
+                        }
+                        if let Some((t0, l0)) = column_last[u - u0]
+                            && l0 == label
+                        {
+                            gap(&mut column_fills, t0, v, &|t| t * w + u, label, fit);
+                        }
                     }
-                    last = Some((u, l));
+                    row_last = Some((u, l));
+                    column_last[u - u0] = Some((v, l));
                 }
             }
         }
-        for &(label, fit, [u0, v0, u1, v1]) in &united {
-            let mut last: Vec<Option<(usize, u32)>> = vec![None; u1 - u0 + 1];
-            for v in v0..=v1 {
-                for u in u0..=u1 {
-                    let l = labels[v * w + u];
-                    if l == 0 {
-                        continue;
-                    }
-                    if let Some((t0, l0)) = last[u - u0]
-                        && l0 == label
-                        && l == label
-                    {
-                        gap(t0, v, &|t| t * w + u, label, fit);
-                    }
-                    last[u - u0] = Some((v, l));
-                }
-            }
-        }
-        for (i, l) in fills {
+        // Rows' fills first: where a gap is both, the row's fill is the one kept.
+        for (i, l) in row_fills.into_iter().chain(column_fills) {
             if self.labels.data[i as usize] == 0 {
                 self.labels.data[i as usize] = l;
                 self.pixels[l as usize - 1].push(i);
