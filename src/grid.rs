@@ -74,13 +74,22 @@ pub fn flood(start: usize, w: usize, h: usize, seen: &mut [bool], inside: impl F
     out
 }
 
-/// 8-connected components of the pixels where `inside` holds: a label per pixel (0
-/// outside; components numbered from 1 in the scan order of their first pixel) and
-/// the number of components. Runs of pixels along rows are joined by union-find with
-/// the runs they touch in the row above, so the work grows with the runs, not pixels.
-pub fn label_components(inside: &[bool], w: usize, h: usize) -> (Vec<u32>, usize) {
-    // Runs [start, end) of row v, in scan order, and their union-find parents.
-    let mut runs: Vec<(usize, usize, usize)> = Vec::new();
+/// A run of one component along a row: pixel indices `start..end`, component `label`
+/// (numbered from 1 in the scan order of the components' first pixels).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ComponentRun {
+    pub start: usize,
+    pub end: usize,
+    pub label: u32,
+}
+
+/// 8-connected components of the pixels where `inside` holds, as their runs along the
+/// rows in scan order, and the number of components. Runs are joined by union-find with
+/// the runs they touch in the row above, so the work grows with the runs, not pixels;
+/// callers that need per-component sums or lists take them run by run too.
+pub fn component_runs(inside: &[bool], w: usize, h: usize) -> (Vec<ComponentRun>, usize) {
+    // Runs of row v, in scan order, and their union-find parents.
+    let mut runs: Vec<ComponentRun> = Vec::new();
     let mut parent: Vec<u32> = Vec::new();
     fn root(parent: &mut [u32], mut r: u32) -> u32 {
         while parent[r as usize] != r {
@@ -94,25 +103,22 @@ pub fn label_components(inside: &[bool], w: usize, h: usize) -> (Vec<u32>, usize
         let row = &inside[v * w..(v + 1) * w];
         let first = runs.len();
         let mut u = 0;
-        while u < w {
-            if !row[u] {
-                u += 1;
-                continue;
-            }
-            let start = u;
-            while u < w && row[u] {
-                u += 1;
-            }
+        while let Some(skip) = row[u..].iter().position(|&b| b) {
+            let start = u + skip;
+            u = start + row[start..].iter().position(|&b| !b).unwrap_or(w - start);
             let me = runs.len() as u32;
-            runs.push((v, start, u));
+            runs.push(ComponentRun { start: v * w + start, end: v * w + u, label: 0 });
             parent.push(me);
             // Runs above touching columns start - 1 ..= u (diagonals included); both rows'
-            // runs are in column order, so the first candidate only moves right.
-            while above.start < above.end && runs[above.start].2 < start {
+            // runs are in column order, so the first candidate only moves right. (None
+            // above row 0: `above` is empty there.)
+            let row_above = (v * w).wrapping_sub(w);
+            let (reach_start, reach_end) = (row_above.wrapping_add(start), row_above.wrapping_add(u));
+            while above.start < above.end && runs[above.start].end < reach_start {
                 above.start += 1;
             }
             for k in above.clone() {
-                if runs[k].1 > u {
+                if runs[k].start > reach_end {
                     break;
                 }
                 let (a, b) = (root(&mut parent, k as u32), root(&mut parent, me));
@@ -122,16 +128,27 @@ pub fn label_components(inside: &[bool], w: usize, h: usize) -> (Vec<u32>, usize
         }
         above = first..runs.len();
     }
-    let mut labels = vec![0u32; w * h];
     let mut label_of_root = vec![0u32; runs.len()];
     let mut count = 0;
-    for (k, &(v, s, e)) in runs.iter().enumerate() {
+    for k in 0..runs.len() {
         let r = root(&mut parent, k as u32) as usize;
         if label_of_root[r] == 0 {
             count += 1;
             label_of_root[r] = count as u32;
         }
-        labels[v * w + s..v * w + e].fill(label_of_root[r]);
+        runs[k].label = label_of_root[r];
+    }
+    (runs, count)
+}
+
+/// 8-connected components of the pixels where `inside` holds: a label per pixel (0
+/// outside; components numbered from 1 in the scan order of their first pixel) and
+/// the number of components (`component_runs`, painted).
+pub fn label_components(inside: &[bool], w: usize, h: usize) -> (Vec<u32>, usize) {
+    let (runs, count) = component_runs(inside, w, h);
+    let mut labels = vec![0u32; w * h];
+    for r in &runs {
+        labels[r.start..r.end].fill(r.label);
     }
     (labels, count)
 }

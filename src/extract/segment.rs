@@ -17,7 +17,9 @@ use rayon::prelude::*;
 use super::Grid;
 use super::cloud::Cloud;
 use super::cpu::ransac::{PlaneFit, PointBatch, refit};
-use crate::grid::{flood, label_components, runs};
+use std::ops::Range;
+
+use crate::grid::{component_runs, flood, runs};
 
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
 #[derive(Clone, Debug)]
@@ -32,19 +34,31 @@ impl Segmentation {
     /// `min_pixels` pixels becoming regions in scan order.
     pub fn components(boundary: &Grid<u8>, min_pixels: usize) -> Segmentation {
         let free: Vec<bool> = boundary.data.iter().map(|&b| b == 0).collect();
-        let (labels, count) = label_components(&free, boundary.width, boundary.height);
-        Segmentation::from_labels(
-            Grid { width: boundary.width, height: boundary.height, data: labels },
-            count,
-            min_pixels,
-        )
+        let (runs, count) = component_runs(&free, boundary.width, boundary.height);
+        let runs = runs.iter().map(|r| (r.start..r.end, r.label));
+        Segmentation::from_runs(boundary.width, boundary.height, runs, count, min_pixels)
     }
 
     /// Regions from component labels (1..=count, 0 outside any, numbered in scan order):
     /// those with at least `min_pixels` pixels, renumbered in the same order.
-    pub fn from_labels(mut labels: Grid<u32>, count: usize, min_pixels: usize) -> Segmentation {
+    pub fn from_labels(labels: Grid<u32>, count: usize, min_pixels: usize) -> Segmentation {
+        Segmentation::from_runs(labels.width, labels.height, label_runs(&labels.data), count, min_pixels)
+    }
+
+    /// Regions from the runs of components 1..=count (pixel index ranges in scan order,
+    /// each with its component): sizes, numbers and pixel lists taken run by run, never
+    /// pixel by pixel (a count per pixel waits on the previous pixel's store to its count).
+    fn from_runs(
+        w: usize,
+        h: usize,
+        runs: impl Iterator<Item = (Range<usize>, u32)> + Clone,
+        count: usize,
+        min_pixels: usize,
+    ) -> Segmentation {
         let mut sizes = vec![0usize; count + 1];
-        labels.data.iter().for_each(|&l| sizes[l as usize] += 1);
+        for (range, l) in runs.clone() {
+            sizes[l as usize] += range.len();
+        }
         let mut region_of = vec![0u32; count + 1];
         let mut pixels: Vec<Vec<u32>> = Vec::new();
         for l in 1..=count {
@@ -53,9 +67,15 @@ impl Segmentation {
                 region_of[l] = pixels.len() as u32;
             }
         }
-        labels.data.iter_mut().for_each(|l| *l = region_of[*l as usize]);
-        push_pixels(&labels.data, &mut pixels);
-        Segmentation { labels, pixels }
+        let mut labels = vec![0u32; w * h];
+        for (range, l) in runs {
+            let r = region_of[l as usize];
+            if r != 0 {
+                labels[range.clone()].fill(r);
+                pixels[r as usize - 1].extend(range.start as u32..range.end as u32);
+            }
+        }
+        Segmentation { labels: Grid { width: w, height: h, data: labels }, pixels }
     }
 
     /// Adds a region of these pixels (sorted here), returning its index.
@@ -122,31 +142,35 @@ impl Segmentation {
                     }
                 }
             }
-            // Everything else in the region is released, then its pieces regrouped.
+            // Everything else in the region is released (marked so, for the floods of its
+            // pieces), then its pieces regrouped.
             let old = std::mem::take(&mut self.pixels[r]);
             for &i in &old {
-                self.labels.data[i as usize] = 0;
+                self.labels.data[i as usize] = RELEASED;
             }
-            best.sort_unstable();
             for &i in &best {
                 self.labels.data[i as usize] = label;
             }
-            self.pixels[r] = best;
+            // In ascending order as the region's pixels were: no sort.
+            self.pixels[r] = old.iter().copied().filter(|&i| self.labels.data[i as usize] == label).collect();
             fits[r] = refit(&self.points_of(r, cloud), fit.normal_f32(), fit.offset as f32, dist);
             old.iter().for_each(|&i| seen[i as usize] = false);
             for &i in &old {
                 let i = i as usize;
-                if self.labels.data[i] == 0 && !seen[i] {
-                    let piece = flood(i, w, h, &mut seen, |j| {
-                        self.labels.data[j] == 0 && old.binary_search(&(j as u32)).is_ok()
-                    });
+                if self.labels.data[i] == RELEASED && !seen[i] {
+                    let piece = flood(i, w, h, &mut seen, |j| self.labels.data[j] == RELEASED);
                     if piece.len() >= min_pixels {
                         new_regions.push(self.push(piece));
                         fits.push(None);
                     }
                 }
             }
-            old.iter().for_each(|&i| seen[i as usize] = false);
+            for &i in &old {
+                seen[i as usize] = false;
+                if self.labels.data[i as usize] == RELEASED {
+                    self.labels.data[i as usize] = 0;
+                }
+            }
         }
         new_regions
     }
@@ -177,7 +201,6 @@ impl Segmentation {
             .into_iter()
             .flatten()
         };
-        let label_at = |labels: &[u32], (u, v): (usize, usize)| labels[v * w + u];
         // The first wave's candidates: unlabelled pixels beside a labelled one. A pixel that
         // did not join in one wave can only join in the next through a neighbour that did:
         // after the first, each wave looks at those pixels only.
@@ -186,14 +209,34 @@ impl Segmentation {
         for v in 0..h {
             let row = &labels[v * w..(v + 1) * w];
             let (up, down) = ((v > 0).then(|| &labels[(v - 1) * w..v * w]), labels.get((v + 1) * w..(v + 2) * w));
-            for u in 0..w {
-                if row[u] == 0
-                    && ((u > 0 && row[u - 1] != 0)
-                        || (u + 1 < w && row[u + 1] != 0)
-                        || up.is_some_and(|r| r[u] != 0)
-                        || down.is_some_and(|r| r[u] != 0))
-                {
-                    candidates.push(pack((u, v)));
+            // Rows beyond the image: the row itself stands in (an unlabelled pixel's own label is 0).
+            let (above, below) = (up.unwrap_or(row), down.unwrap_or(row));
+            for u0 in (0..w).step_by(BLOCK_PX) {
+                let u1 = (u0 + BLOCK_PX).min(w);
+                // Whole blocks inside a region or away from any are passed over by one
+                // branch-free test (it vectorises); the image's first and last block are
+                // taken pixel by pixel.
+                if u0 > 0 && u1 < w {
+                    let mut border = false;
+                    let sides = row[u0 - 1..].iter().zip(&row[u0 + 1..]);
+                    for ((&x, (&l, &r)), (&a, &b)) in
+                        row[u0..u1].iter().zip(sides).zip(above[u0..].iter().zip(&below[u0..]))
+                    {
+                        border |= (x == 0) & ((l != 0) | (r != 0) | (a != 0) | (b != 0));
+                    }
+                    if !border {
+                        continue;
+                    }
+                }
+                for u in u0..u1 {
+                    if row[u] == 0
+                        && ((u > 0 && row[u - 1] != 0)
+                            || (u + 1 < w && row[u + 1] != 0)
+                            || up.is_some_and(|r| r[u] != 0)
+                            || down.is_some_and(|r| r[u] != 0))
+                    {
+                        candidates.push(pack((u, v)));
+                    }
                 }
             }
         }
@@ -205,10 +248,18 @@ impl Segmentation {
                 .with_min_len(256)
                 .filter_map(|&c| {
                     let (u, v) = unpack(c);
-                    if !neighbours((u, v)).any(|q| label_at(labels, q) != 0) {
+                    let i = v * w + u;
+                    // The labels of its 4-neighbours (0 off the image), read once.
+                    let touching = [
+                        if u > 0 { labels[i - 1] } else { 0 },
+                        if u + 1 < w { labels[i + 1] } else { 0 },
+                        if v > 0 { labels[i - w] } else { 0 },
+                        if v + 1 < h { labels[i + w] } else { 0 },
+                    ];
+                    if touching == [0; 4] {
                         return None;
                     }
-                    let p = cloud.point(v * w + u)?;
+                    let p = cloud.point(i)?;
                     let mut best: Option<(f64, u32)> = None;
                     for &l in nearby.around(u, v) {
                         let Some(fit) = &fits[l as usize - 1] else { continue };
@@ -218,7 +269,7 @@ impl Segmentation {
                         }
                     }
                     let (_, l) = best?;
-                    neighbours((u, v)).any(|q| label_at(labels, q) == l).then_some((c, l))
+                    touching.contains(&l).then_some((c, l))
                 })
                 .collect();
             if joins.is_empty() {
@@ -257,16 +308,30 @@ impl Segmentation {
 /// ascending, a run of one label at a time: labels come in long runs along the rows, and
 /// a run is one contiguous extend where pixel by pixel each push reloaded its list.
 fn push_pixels(labels: &[u32], pixels: &mut [Vec<u32>]) {
-    let mut i = 0;
-    while i < labels.len() {
-        let l = labels[i];
-        let end = i + labels[i..].iter().position(|&x| x != l).unwrap_or(labels.len() - i);
-        if l != 0 {
-            pixels[l as usize - 1].extend(i as u32..end as u32);
-        }
-        i = end;
+    for (range, l) in label_runs(labels) {
+        pixels[l as usize - 1].extend(range.start as u32..range.end as u32);
     }
 }
+
+/// The stretches of one non-zero label in a label image, in order, with their label.
+fn label_runs(labels: &[u32]) -> impl Iterator<Item = (Range<usize>, u32)> + Clone + '_ {
+    let mut i = 0;
+    std::iter::from_fn(move || {
+        i += labels.get(i..)?.iter().position(|&x| x != 0)?;
+        let l = labels[i];
+        let end = i + labels[i..].iter().position(|&x| x != l).unwrap_or(labels.len() - i);
+        let range = i..end;
+        i = end;
+        Some((range, l))
+    })
+}
+
+/// The label of a leaking region's pixels between its split and their regrouping.
+const RELEASED: u32 = u32::MAX;
+
+/// Pixels along a row tested at once by the scans that pass over blocks where nothing
+/// changes.
+const BLOCK_PX: usize = 32;
 
 /// Two regions meet along a crease when at least this many rows and columns step from
 /// one to the other: fewer is a corner touch or a stray pixel.
@@ -305,12 +370,18 @@ impl Segmentation {
     fn steps_between(&self, cloud: &Cloud, ratio: f32, max_gap: usize) -> Vec<((u32, u32), u32)> {
         let (w, h) = (self.labels.width, self.labels.height);
         let l = &self.labels.data;
-        let mut steps = Vec::new();
+        let mut steps: Vec<((u32, u32), u32)> = Vec::new();
         // From labelled pixel i to labelled pixel j, `px` pixels apart, nothing labelled between.
         let mut step = |i: usize, j: usize, px: usize| {
             let (a, b, zi, zj) = (l[i], l[j], cloud.depth(i), cloud.depth(j));
             if a != b && zi > 0.0 && zj > 0.0 && (zi - zj).abs() <= ratio * px as f32 * zi.min(zj) {
-                steps.push((a.min(b), a.max(b)));
+                // Counted as they come where the pair repeats (along a border it mostly
+                // does): far fewer entries to sort.
+                let pair = (a.min(b), a.max(b));
+                match steps.last_mut() {
+                    Some((p, n)) if *p == pair => *n += 1,
+                    _ => steps.push((pair, 1)),
+                }
             }
         };
         // The nearest labelled pixel before j, `stride` apart (1: along the row, w: up the
@@ -319,26 +390,43 @@ impl Segmentation {
             (1..=room.min(max_gap + 1)).map(|k| (j - k * stride, k)).find(|&(i, _)| l[i] != 0)
         };
         for v in 0..h {
-            for u in 0..w {
-                let j = v * w + u;
-                let x = l[j];
-                // Most labelled pixels have the same label left and above: nothing to do.
-                if x == 0 || ((u == 0 || l[j - 1] == x) && (v == 0 || l[j - w] == x)) {
-                    continue;
+            let row = &l[v * w..(v + 1) * w];
+            // Row 0 has nothing above: itself stands in, never differing.
+            let up = if v > 0 { &l[(v - 1) * w..v * w] } else { row };
+            for u0 in (0..w).step_by(BLOCK_PX) {
+                let u1 = (u0 + BLOCK_PX).min(w);
+                // Most labelled pixels have the same label left and above: whole blocks
+                // without a change are passed over by one branch-free test (it vectorises);
+                // the first block of a row is taken pixel by pixel.
+                if u0 > 0 {
+                    let mut changes = false;
+                    for ((&x, &left), &above) in row[u0..u1].iter().zip(&row[u0 - 1..]).zip(&up[u0..]) {
+                        changes |= (x != 0) & ((x != left) | (x != above));
+                    }
+                    if !changes {
+                        continue;
+                    }
                 }
-                for (stride, room) in [(1, u), (w, v)] {
-                    if let Some((i, px)) = nearest(j, stride, room) {
-                        step(i, j, px);
+                for u in u0..u1 {
+                    let j = v * w + u;
+                    let x = l[j];
+                    if x == 0 || ((u == 0 || l[j - 1] == x) && (v == 0 || l[j - w] == x)) {
+                        continue;
+                    }
+                    for (stride, room) in [(1, u), (w, v)] {
+                        if let Some((i, px)) = nearest(j, stride, room) {
+                            step(i, j, px);
+                        }
                     }
                 }
             }
         }
         steps.sort_unstable();
         let mut counted: Vec<((u32, u32), u32)> = Vec::new();
-        for pair in steps {
+        for (pair, k) in steps {
             match counted.last_mut() {
-                Some((p, n)) if *p == pair => *n += 1,
-                _ => counted.push((pair, 1)),
+                Some((p, n)) if *p == pair => *n += k,
+                _ => counted.push((pair, k)),
             }
         }
         counted

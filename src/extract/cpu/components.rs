@@ -1,24 +1,28 @@
 //! 8-connected components, and Canny's hysteresis built on them: the CPU twin of
 //! shaders/components.wgsl and shaders/hysteresis.wgsl.
 //!
-//! The fast loop is `grid::label_components` (runs joined by union-find, scan-order
+//! The fast loop is `grid::component_runs` (runs joined by union-find, scan-order
 //! labels). The shader labels each pixel with its component's root + 1, the root being
 //! the component's first pixel in scan order; `dense_from_roots` turns those into the
 //! fast loop's labels, so both twins hand the same labels on. The oracles mirror the
 //! shaders' passes line for line.
 
-use crate::grid::{Grid, label_components};
+use crate::grid::{Grid, component_runs};
 
 /// Hysteresis: 1 for strong pixels and the weak ones 8-connected to them through weak pixels.
 pub fn hysteresis(class: &Grid<u8>) -> Grid<u8> {
     let (w, h) = (class.width, class.height);
     let candidate: Vec<bool> = class.data.iter().map(|&c| c != 0).collect();
-    let (labels, count) = label_components(&candidate, w, h);
+    let (runs, count) = component_runs(&candidate, w, h);
     let mut strong = vec![false; count + 1];
-    for (&l, &c) in labels.iter().zip(&class.data) {
-        strong[l as usize] |= c == 2;
+    for r in &runs {
+        strong[r.label as usize] |= class.data[r.start..r.end].contains(&2);
     }
-    Grid { width: w, height: h, data: labels.iter().map(|&l| u8::from(l != 0 && strong[l as usize])).collect() }
+    let mut out = vec![0u8; w * h];
+    for r in runs.iter().filter(|r| strong[r.label as usize]) {
+        out[r.start..r.end].fill(1);
+    }
+    Grid { width: w, height: h, data: out }
 }
 
 /// Root labels (root pixel + 1, 0 outside) renumbered in place 1, 2, ... in the scan
@@ -129,6 +133,7 @@ mod tests {
     use super::*;
     use crate::extract::cpu::canny::{classify, normal_gradient};
     use crate::extract::cpu::test_frames::stair_normals;
+    use crate::grid::label_components;
 
     /// Masks with every shape the unions must get right: snakes, spirals, diagonals only,
     /// one-pixel gaps, and a noisy frame's edge classes.
