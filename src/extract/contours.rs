@@ -194,14 +194,12 @@ fn follow(shape: &Shape, start: (i32, i32), from: usize, number: i32, marks: &mu
         return vec![Point::new(start.0, start.1)];
     };
     let second = step(start, first);
-    let (mut previous, mut current) = (second, start);
+    // `back`: the direction from the current pixel to the one before it; the second pixel
+    // stands before the start. A step in direction d lands where d + 4 points back.
+    let (mut current, mut back) = (start, first);
     let mut points = Vec::new();
     loop {
         points.push(Point::new(current.0, current.1));
-        let back = DIRECTIONS
-            .iter()
-            .position(|&d| d == (previous.0 - current.0, previous.1 - current.1))
-            .expect("a neighbour");
         // Counter-clockwise from just before the pixel we came from: the next border pixel
         // (the one we came from at worst), noting whether the east was seen empty on the way.
         let mut east_seen = false;
@@ -225,7 +223,7 @@ fn follow(shape: &Shape, start: (i32, i32), from: usize, number: i32, marks: &mu
         if following == start && current == second {
             break;
         }
-        (previous, current) = (current, following);
+        (current, back) = (following, (next + 4) % 8);
     }
     points
 }

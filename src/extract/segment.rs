@@ -485,7 +485,8 @@ impl Segmentation {
                 self.labels.data[i as usize] = a as u32 + 1;
             }
             self.pixels[a].extend(moved);
-            self.pixels[a].sort_unstable();
+            // Two ascending runs: the stable sort finds them and merges, in linear time.
+            self.pixels[a].sort();
             (fits[a], fits[b]) = (Some(joined), None);
             now_in[b] = a;
             joined_into[a] = true;
@@ -558,7 +559,9 @@ impl Segmentation {
         }
         for (r, p) in self.pixels.iter_mut().enumerate() {
             if regions[r] {
-                p.sort_unstable();
+                // An ascending run and the few fills after it: the stable sort sorts those
+                // and merges the two runs, in about linear time.
+                p.sort();
             }
         }
     }
