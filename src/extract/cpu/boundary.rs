@@ -38,7 +38,12 @@ pub fn boundary(
     let with_holes = Grid {
         width: w,
         height: h,
-        data: closed.data.iter().zip(&normals.data).map(|(&l, n)| (l != 0 || *n == [0.0; 3]) as u8).collect(),
+        data: closed
+            .data
+            .iter()
+            .zip(&normals.data)
+            .map(|(&l, n)| u8::from((l != 0) | ((n[0] == 0.0) & (n[1] == 0.0) & (n[2] == 0.0))))
+            .collect(),
     };
     let sealed = close(&with_holes, seal);
     // Regions are 8-connected (as contour tracing sees them), so a thin diagonal line
@@ -68,7 +73,8 @@ pub fn boundary(
 /// (both valid); `above` and `below` are the neighbouring rows, empty beyond the image.
 /// Whole-row comparisons, so the loops vectorise.
 fn depth_steps(row: &[f32], above: &[f32], below: &[f32], out: &mut [u8], ratio: f32) {
-    let jump = |z: f32, q: f32| u8::from(z != 0.0 && q != 0.0 && (q - z).abs() > ratio * z);
+    // `&`, not `&&`: no branches, so the loops vectorise.
+    let jump = |z: f32, q: f32| u8::from((z != 0.0) & (q != 0.0) & ((q - z).abs() > ratio * z));
     out.fill(0);
     // Right neighbours (zip stops at the row's end), then left ones; rows are never empty.
     for (o, (&z, &q)) in out.iter_mut().zip(row.iter().zip(&row[1..])) {
