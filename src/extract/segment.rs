@@ -11,14 +11,14 @@
 //! - `grow`: regions take back, wave by wave, the border pixels whose raw 3-D point lies
 //!   within the inlier distance of their plane, the nearest plane winning where two meet.
 
+use std::ops::Range;
+
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
 use super::Grid;
 use super::cloud::Cloud;
 use super::cpu::ransac::{PlaneFit, PointBatch, refit};
-use std::ops::Range;
-
 use crate::grid::{component_runs, flood, runs};
 
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
