@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use super::Grid;
 use super::cloud::Cloud;
 use super::cpu::ransac::{PlaneFit, PointBatch, refit};
-use crate::grid::{component_runs, flood, runs};
+use crate::grid::{busy_blocks, component_runs, flood, runs};
 
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
 #[derive(Clone, Debug)]
@@ -211,32 +211,27 @@ impl Segmentation {
             let (up, down) = ((v > 0).then(|| &labels[(v - 1) * w..v * w]), labels.get((v + 1) * w..(v + 2) * w));
             // Rows beyond the image: the row itself stands in (an unlabelled pixel's own label is 0).
             let (above, below) = (up.unwrap_or(row), down.unwrap_or(row));
-            for u0 in (0..w).step_by(BLOCK_PX) {
-                let u1 = (u0 + BLOCK_PX).min(w);
-                // Whole blocks inside a region or away from any are passed over by one
-                // branch-free test (it vectorises); the image's first and last block are
-                // taken pixel by pixel.
-                if u0 > 0 && u1 < w {
-                    let mut border = false;
-                    let sides = row[u0 - 1..].iter().zip(&row[u0 + 1..]);
-                    for ((&x, (&l, &r)), (&a, &b)) in
-                        row[u0..u1].iter().zip(sides).zip(above[u0..].iter().zip(&below[u0..]))
-                    {
-                        border |= (x == 0) & ((l != 0) | (r != 0) | (a != 0) | (b != 0));
-                    }
-                    if !border {
-                        continue;
-                    }
+            // Blocks inside a region or away from any are passed over; the image's first
+            // and last block are taken pixel by pixel.
+            let border = |block: Range<usize>| {
+                let (u0, u1) = (block.start, block.end);
+                if u0 == 0 || u1 == w {
+                    return true;
                 }
-                for u in u0..u1 {
-                    if row[u] == 0
-                        && ((u > 0 && row[u - 1] != 0)
-                            || (u + 1 < w && row[u + 1] != 0)
-                            || up.is_some_and(|r| r[u] != 0)
-                            || down.is_some_and(|r| r[u] != 0))
-                    {
-                        candidates.push(pack((u, v)));
-                    }
+                let sides = row[u0 - 1..].iter().zip(&row[u0 + 1..]);
+                let ends = above[u0..].iter().zip(&below[u0..]);
+                row[block].iter().zip(sides).zip(ends).fold(false, |any, ((&x, (&l, &r)), (&a, &b))| {
+                    any | ((x == 0) & ((l != 0) | (r != 0) | (a != 0) | (b != 0)))
+                })
+            };
+            for u in busy_blocks(w, border).flatten() {
+                if row[u] == 0
+                    && ((u > 0 && row[u - 1] != 0)
+                        || (u + 1 < w && row[u + 1] != 0)
+                        || up.is_some_and(|r| r[u] != 0)
+                        || down.is_some_and(|r| r[u] != 0))
+                {
+                    candidates.push(pack((u, v)));
                 }
             }
         }
@@ -329,10 +324,6 @@ fn label_runs(labels: &[u32]) -> impl Iterator<Item = (Range<usize>, u32)> + Clo
 /// The label of a leaking region's pixels between its split and their regrouping.
 const RELEASED: u32 = u32::MAX;
 
-/// Pixels along a row tested at once by the scans that pass over blocks where nothing
-/// changes.
-const BLOCK_PX: usize = 32;
-
 /// Two regions meet along a crease when at least this many rows and columns step from
 /// one to the other: fewer is a corner touch or a stray pixel.
 const MIN_CREASE_STEPS: u32 = 3;
@@ -393,30 +384,26 @@ impl Segmentation {
             let row = &l[v * w..(v + 1) * w];
             // Row 0 has nothing above: itself stands in, never differing.
             let up = if v > 0 { &l[(v - 1) * w..v * w] } else { row };
-            for u0 in (0..w).step_by(BLOCK_PX) {
-                let u1 = (u0 + BLOCK_PX).min(w);
-                // Most labelled pixels have the same label left and above: whole blocks
-                // without a change are passed over by one branch-free test (it vectorises);
-                // the first block of a row is taken pixel by pixel.
-                if u0 > 0 {
-                    let mut changes = false;
-                    for ((&x, &left), &above) in row[u0..u1].iter().zip(&row[u0 - 1..]).zip(&up[u0..]) {
-                        changes |= (x != 0) & ((x != left) | (x != above));
-                    }
-                    if !changes {
-                        continue;
-                    }
+            // Most labelled pixels have the same label left and above: blocks without a
+            // change are passed over; the first block of a row is taken pixel by pixel.
+            let changes = |block: Range<usize>| {
+                let u0 = block.start;
+                u0 == 0
+                    || row[block]
+                        .iter()
+                        .zip(&row[u0 - 1..])
+                        .zip(&up[u0..])
+                        .fold(false, |any, ((&x, &left), &above)| any | ((x != 0) & ((x != left) | (x != above))))
+            };
+            for u in busy_blocks(w, changes).flatten() {
+                let j = v * w + u;
+                let x = l[j];
+                if x == 0 || ((u == 0 || l[j - 1] == x) && (v == 0 || l[j - w] == x)) {
+                    continue;
                 }
-                for u in u0..u1 {
-                    let j = v * w + u;
-                    let x = l[j];
-                    if x == 0 || ((u == 0 || l[j - 1] == x) && (v == 0 || l[j - w] == x)) {
-                        continue;
-                    }
-                    for (stride, room) in [(1, u), (w, v)] {
-                        if let Some((i, px)) = nearest(j, stride, room) {
-                            step(i, j, px);
-                        }
+                for (stride, room) in [(1, u), (w, v)] {
+                    if let Some((i, px)) = nearest(j, stride, room) {
+                        step(i, j, px);
                     }
                 }
             }

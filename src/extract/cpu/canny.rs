@@ -6,11 +6,13 @@
 //! thresholds (`components`). Directions are chosen by comparisons, not angles, so both
 //! twins pick the same neighbours.
 
+use std::ops::Range;
+
 use rayon::prelude::*;
 
 use super::components::hysteresis;
 use super::{ROWS_PER_TASK, widest_simd};
-use crate::grid::Grid;
+use crate::grid::{Grid, busy_blocks};
 
 /// Gradient of the normal field: (magnitude, NMS sector 0..4) per pixel; sector 4 marks
 /// a pixel whose 3x3 neighbourhood lacks a normal, or on the image's border (magnitude 0
@@ -157,22 +159,17 @@ pub fn classify(grad: &Grid<(f32, u8)>, low: f32, high: f32) -> Grid<u8> {
     let mut class = vec![0u8; w * grad.height];
     class.par_chunks_mut(w).enumerate().for_each(|(v, out)| {
         let row = &grad.data[v * w..(v + 1) * w];
-        for (b, (out, block)) in out.chunks_mut(BLOCK_PX).zip(row.chunks(BLOCK_PX)).enumerate() {
-            // Most of a frame is flat: a block with no magnitude at `low` or over stays 0,
-            // as `suppressed_class` would leave each of its pixels, after one test that
-            // vectorises instead of a branch per pixel.
-            if block.iter().map(|&(m, _)| m >= low).fold(false, |any, at_low| any | at_low) {
-                for (k, o) in out.iter_mut().enumerate() {
-                    *o = suppressed_class(grad, b * BLOCK_PX + k, v, low, high);
-                }
+        // Most of a frame is flat: a block with no magnitude at `low` or over stays 0, as
+        // `suppressed_class` would leave each of its pixels.
+        let edgy = |block: Range<usize>| row[block].iter().fold(false, |any, &(m, _)| any | (m >= low));
+        for block in busy_blocks(w, edgy) {
+            for u in block {
+                out[u] = suppressed_class(grad, u, v, low, high);
             }
         }
     });
     Grid { width: w, height: grad.height, data: class }
 }
-
-/// Pixels along a row that `classify` passes over at once where none is an edge.
-const BLOCK_PX: usize = 32;
 
 /// classify.wgsl at pixel (u, v), the oracle: 0, 1 (weak) or 2 (strong) after non-maximum suppression.
 #[inline]
