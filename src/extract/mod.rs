@@ -28,7 +28,7 @@ use cloud::Cloud;
 use contours::Region;
 use cpu::ransac::{PlaneFit, PointBatch};
 pub use polygon::{FramePolygons, Polygon, VertexKind, build_polygons};
-use segment::Segmentation;
+use segment::{Creases, Segmentation};
 
 /// Why a frame could not be processed.
 #[derive(Debug, thiserror::Error)]
@@ -287,20 +287,21 @@ pub fn extract_with(
         Some(gpu) => Ok(cpu::ransac::fits_from_scores(batch, &gpu.score_hypotheses(batch, hyp, dist)?, hyp, dist)),
     };
     let cloud = Cloud::new(&depth, intr);
-    let (seg, regions, fits) = segment_and_fit(seg, &cloud, cfg, fit, &mut times, &mut lap)?;
-    let polygons = build_polygons(&regions, &fits, &seg, &depth, &cloud, intr, cfg);
+    let (seg, regions, fits, creases) = segment_and_fit(seg, &cloud, cfg, fit, &mut times, &mut lap)?;
+    let polygons = build_polygons(&regions, &fits, &seg, &creases, &depth, intr, cfg);
     times.polygons = lap();
     times.total = t0.elapsed().as_secs_f64() * 1e3;
     let stages = Stages { depth, images, labels: seg.labels, regions, fits };
     Ok((FramePolygons { stamp_ns: frame.stamp_ns, polygons }, stages, times))
 }
 
-/// What segmentation hands on: the regions, their pixels, and each one's plane if it has one.
-pub type Segmented = (Segmentation, Vec<Region>, Vec<Option<PlaneFit>>);
+/// What segmentation hands on: the regions, their pixels, each one's plane if it has one,
+/// and which of them meet along a crease.
+pub type Segmented = (Segmentation, Vec<Region>, Vec<Option<PlaneFit>>, Creases);
 
 /// The regions' planes (`fit` is the batched RANSAC + refit of the twin), leaks split
 /// and fitted again, coplanar pieces joined, regions grown back to their true borders,
-/// outlines traced. Times the RANSAC calls as `ransac`, the rest as `contours`.
+/// outlines traced, creases found. Times the RANSAC calls as `ransac`, the rest as `contours`.
 pub fn segment_and_fit(
     mut seg: Segmentation,
     cloud: &Cloud,
@@ -328,15 +329,24 @@ pub fn segment_and_fit(
     seg.join_coplanar(&mut fits, cloud, cfg.depth_edge_ratio as f32, dist, min_ratio);
     let accepted: Vec<bool> = fits.iter().map(|f| f.is_some_and(|f| f.inlier_ratio() >= min_ratio)).collect();
     seg.grow(&fits, &accepted, cloud, dist, cfg.region_grow_px);
-    let mut points = refit_grown(&seg, &mut fits, &accepted, cloud, dist, min_ratio);
-    // Outlines only for the planes that can become polygons: the refit keeps each accepted
-    // region accepted and touches no other, so `accepted` still says which.
-    let mut regions = contours::trace(&seg, cfg.simplify_tolerance_px, &accepted);
+    // Three jobs that only read the grown regions, side by side: each is a few tenths of a
+    // millisecond that its own parallel loop, held up by the largest region, barely splits.
+    let ((mut points, creases), mut regions) = rayon::join(
+        || {
+            rayon::join(
+                || refit_grown(&seg, &mut fits, &accepted, cloud, dist, min_ratio),
+                || seg.creases(cloud, cfg.depth_edge_ratio as f32),
+            )
+        },
+        // Outlines only for the planes that can become polygons: the refit keeps each
+        // accepted region accepted and touches no other, so `accepted` still says which.
+        || contours::trace(&seg, cfg.simplify_tolerance_px, &accepted),
+    );
     for (region, points) in regions.iter_mut().zip(&mut points) {
         region.points = std::mem::take(points);
     }
     times.contours += lap();
-    Ok((seg, regions, fits))
+    Ok((seg, regions, fits, creases))
 }
 
 /// Fits each accepted region's plane again on its grown pixels, and hands back those

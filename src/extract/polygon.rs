@@ -6,10 +6,9 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::cloud::Cloud;
 use super::contours::Region;
 use super::cpu::ransac::PlaneFit;
-use super::segment::Segmentation;
+use super::segment::{Creases, Segmentation};
 use super::trim;
 use super::uncertainty::{PlaneUncertainty, halves_agreement, plane_uncertainty};
 use crate::config::PipelineConfig;
@@ -101,14 +100,14 @@ pub struct FramePolygons {
 }
 
 /// Polygons from regions and their plane fits: keep well-supported fits, ray cast the
-/// pixel outlines onto the planes, cut them where the planes of their neighbours bound
-/// them, drop what is smaller than the minimum area.
+/// pixel outlines onto the planes, cut them where the planes of the neighbours they meet
+/// along a crease (`creases`) bound them, drop what is smaller than the minimum area.
 pub fn build_polygons(
     regions: &[Region],
     fits: &[Option<PlaneFit>],
     seg: &Segmentation,
+    creases: &Creases,
     depth: &Grid<f32>,
-    cloud: &Cloud,
     intr: &Intrinsics,
     cfg: &PipelineConfig,
 ) -> Vec<Polygon> {
@@ -171,7 +170,6 @@ pub fn build_polygons(
         plane_fits.push(*fit);
         labels.push(region.label);
     }
-    let creases = seg.creases(cloud, cfg.depth_edge_ratio as f32);
     let meet = |a: usize, b: usize| creases.meet(labels[a], labels[b]);
     trim::trim_at_neighbour_planes(&mut out, &points, meet, cfg.ransac_inlier_distance_m);
     for p in &mut out {
