@@ -283,6 +283,7 @@ mod avx2 {
     use std::arch::x86_64::*;
 
     use super::{InlierSums, PlaneFrame};
+    use crate::extract::cpu::lane_sum;
 
     /// The sums over the first `quads` groups of four of every `stride`-th point.
     ///
@@ -328,12 +329,7 @@ mod avx2 {
                 weighted[t] = _mm256_fmadd_pd(terms[t], g2, weighted[t]);
             }
         }
-        let total = |v: __m256d| {
-            let mut l = [0.0f64; 4];
-            // SAFETY: stores 4 f64 into a local array of 4.
-            unsafe { _mm256_storeu_pd(l.as_mut_ptr(), v) };
-            (l[0] + l[1]) + (l[2] + l[3])
-        };
+        let total = |v| lane_sum(v);
         InlierSums {
             count: total(count),
             sum: sum.map(total),

@@ -44,6 +44,18 @@ pub fn image_stages(
 /// Rows per rayon task in the per-row loops: one row is too little work to be worth a thread hop.
 pub(crate) const ROWS_PER_TASK: usize = 8;
 
+/// The four f64 lanes of an AVX vector added up, in lane order (pairs first): how the
+/// AVX2 passes that keep a sum per lane (refits, plane covariances) hand back their sums.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+pub(crate) fn lane_sum(v: std::arch::x86_64::__m256d) -> f64 {
+    let mut l = [0.0f64; 4];
+    // SAFETY: stores 4 f64 into a local array of 4.
+    unsafe { std::arch::x86_64::_mm256_storeu_pd(l.as_mut_ptr(), v) };
+    (l[0] + l[1]) + (l[2] + l[3])
+}
+
 /// Defines `$name` to run `$portable` (an `#[inline(always)]` fn) compiled for AVX2
 /// when the CPU has it, else as compiled for the baseline target. The loops are plain
 /// Rust either way; only the width of the vectors the compiler may use differs, which

@@ -272,6 +272,7 @@ mod avx2 {
     use std::arch::x86_64::*;
 
     use super::Moments;
+    use crate::extract::cpu::lane_sum;
 
     /// The x, y and z of the four points at `p` (12 floats).
     ///
@@ -287,16 +288,6 @@ mod avx2 {
         let y = _mm_blend_ps::<0b0100>(_mm_blend_ps::<0b1001>(a, b), c); // y1 y0 y3 y2
         let z = _mm_blend_ps::<0b1001>(_mm_blend_ps::<0b0010>(a, b), c); // z2 z1 z0 z3
         [_mm_permute_ps::<0x6C>(x), _mm_permute_ps::<0xB1>(y), _mm_permute_ps::<0xC6>(z)]
-    }
-
-    /// Each lane's f64 sums added up, lanes in order.
-    #[inline]
-    #[target_feature(enable = "avx2")]
-    fn total(v: __m256d) -> f64 {
-        let mut l = [0.0f64; 4];
-        // SAFETY: stores 4 f64 into a local array of 4.
-        unsafe { _mm256_storeu_pd(l.as_mut_ptr(), v) };
-        (l[0] + l[1]) + (l[2] + l[3])
     }
 
     /// `inlier_moments` of a multiple of four points.
@@ -332,7 +323,7 @@ mod avx2 {
             acc[8] = _mm256_fmadd_pd(qy, qz, acc[8]);
             acc[9] = _mm256_fmadd_pd(qz, qz, acc[9]);
         }
-        let t = acc.map(|v| total(v));
+        let t = acc.map(|v| lane_sum(v));
         Moments { count: t[0], sum: [t[1], t[2], t[3]], products: [t[4], t[5], t[6], t[7], t[8], t[9]] }
     }
 
@@ -361,7 +352,7 @@ mod avx2 {
         let mut c = [0i64; 4];
         // SAFETY: stores 4 i64 into a local array of 4.
         unsafe { _mm256_storeu_si256(c.as_mut_ptr().cast(), count) };
-        (c.iter().sum::<i64>() as usize, total(squares))
+        (c.iter().sum::<i64>() as usize, lane_sum(squares))
     }
 }
 
