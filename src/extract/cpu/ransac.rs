@@ -117,8 +117,7 @@ pub fn score_at(batch: &PointBatch, r: usize, h: u32, inlier_distance: f32) -> u
     let stride = score_stride(pts.len());
     let mut inliers = 0;
     for j in 0..pts.len().div_ceil(stride) {
-        let q = pts[j * stride];
-        if (nrm[0] * q[0] + nrm[1] * q[1] + nrm[2] * q[2] + d).abs() < inlier_distance {
+        if near_plane(&pts[j * stride], nrm, d, inlier_distance) {
             inliers += 1;
         }
     }
@@ -176,7 +175,8 @@ pub fn refit(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32) -> Option<Plan
     Some(PlaneFit { normal, offset, inliers: support, points: points.len(), rms })
 }
 
-/// Whether p lies within `dist` of the plane (n, d), in f32 as RANSAC scores it.
+/// Whether p lies within `dist` of the plane (n, d), in f32: how a hypothesis scores a
+/// point (`score_at`) and a refit picks its inliers.
 #[inline(always)]
 fn near_plane(p: &[f32; 3], n: [f32; 3], d: f32, dist: f32) -> bool {
     (n[0] * p[0] + n[1] * p[1] + n[2] * p[2] + d).abs() < dist
@@ -193,12 +193,11 @@ struct Moments {
 
 impl Moments {
     fn plus(self, o: Moments) -> Moments {
-        let add = |a: &mut [f64], b: &[f64]| a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
-        let mut m = self;
-        m.count += o.count;
-        add(&mut m.sum, &o.sum);
-        add(&mut m.products, &o.products);
-        m
+        Moments {
+            count: self.count + o.count,
+            sum: std::array::from_fn(|k| self.sum[k] + o.sum[k]),
+            products: std::array::from_fn(|k| self.products[k] + o.products[k]),
+        }
     }
 }
 
