@@ -39,3 +39,8 @@ cargo build --locked --examples --features realsense
 # All targets (library, binary, integration tests, examples, each benchmark run once),
 # with the RealSense drivers compiled, linked and tested against recorded bags.
 cargo test --locked --all-targets --features realsense
+# The CPU twin's stage tests again at each narrower vector width (POLYMAP_SIMD caps what
+# the loops use): a CI machine with AVX-512 would otherwise test its widest path only.
+for simd in avx2 baseline; do
+    POLYMAP_SIMD=$simd cargo test --locked --features realsense --lib extract::
+done

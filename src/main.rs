@@ -677,7 +677,11 @@ fn bench(s: &Sequence, config: &Config, frames: usize, json: bool) -> Result<()>
     let device = match &extractor.engine {
         extract::Engine::Gpu(g) if g.has_timestamps() => format!("{}, stages by GPU timestamps", g.describe()),
         extract::Engine::Gpu(g) => format!("{}, no GPU timestamps: the stages' time is in readback", g.describe()),
-        extract::Engine::Cpu => format!("CPU twin, {} threads", rayon::current_num_threads()),
+        extract::Engine::Cpu => format!(
+            "CPU twin, {} threads, {} vectors",
+            rayon::current_num_threads(),
+            extract::cpu::simd::level().name()
+        ),
     };
     let (w, h) = (s.intrinsics.width, s.intrinsics.height);
     let fps = frames as f64 / wall;
@@ -688,7 +692,8 @@ fn bench(s: &Sequence, config: &Config, frames: usize, json: bool) -> Result<()>
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({
                 "sequence": s.dir, "width": w, "height": h, "frames": frames,
-                "backend": extractor.backend(), "device": device, "threads": rayon::current_num_threads(), "fps": fps, "stages_ms": per_stage,
+                "backend": extractor.backend(), "device": device, "threads": rayon::current_num_threads(),
+                "simd": extract::cpu::simd::level().name(), "fps": fps, "stages_ms": per_stage,
             }))?
         );
         return Ok(());

@@ -628,17 +628,23 @@ fn regions_meet_along_a_crease_not_across_a_wide_gap_a_depth_step_or_a_corner() 
 }
 
 #[test]
-fn bench_runs_the_cpu_stages_on_the_threads_it_is_given() {
-    for threads in [1, 2] {
-        let run = std::process::Command::new(env!("CARGO_BIN_EXE_polymap"))
-            .args(["bench", "mock_frames/straight_320", "--backend", "cpu", "--frames", "3", "--json", "--threads"])
-            .arg(threads.to_string())
-            .output()
-            .unwrap();
+fn bench_runs_the_cpu_stages_on_the_threads_and_vectors_it_is_given() {
+    use polymap::extract::cpu::simd::Level;
+    // Without POLYMAP_SIMD the widest vectors the CPU has; with it, no wider than it says.
+    for (threads, simd) in [(1, None), (2, Some(Level::Baseline)), (1, Some(Level::Avx2))] {
+        let mut bench = std::process::Command::new(env!("CARGO_BIN_EXE_polymap"));
+        bench.args(["bench", "mock_frames/straight_320", "--backend", "cpu", "--frames", "3", "--json", "--threads"]);
+        bench.arg(threads.to_string()).env_remove("POLYMAP_SIMD");
+        if let Some(level) = simd {
+            bench.env("POLYMAP_SIMD", level.name());
+        }
+        let run = bench.output().unwrap();
         assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
         let v: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+        let level = simd.unwrap_or(Level::Avx512).min(Level::detected());
         assert_eq!(v["threads"], threads, "{v}");
-        assert_eq!(v["device"], format!("CPU twin, {threads} threads"));
+        assert_eq!(v["simd"], level.name(), "{v}");
+        assert_eq!(v["device"], format!("CPU twin, {threads} threads, {} vectors", level.name()));
         for stage in ["upload", "diffusion", "normals", "edges", "contours", "ransac", "polygons", "total"] {
             let median = v["stages_ms"][stage]["median"].as_f64().unwrap();
             assert!(median.is_finite() && median >= 0.0, "{stage}: {v}");

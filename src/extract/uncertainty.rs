@@ -229,9 +229,9 @@ impl PlaneFrame {
     /// last ones (and all, elsewhere) by `inlier_sums_scalar`, the AVX2 pass's oracle.
     fn inlier_sums(&self, points: &[[f32; 3]], stride: usize) -> InlierSums {
         #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+        if super::cpu::simd::level() >= super::cpu::simd::Level::Avx2 {
             let quads = points.len().div_ceil(stride) / 4;
-            // SAFETY: the CPU has AVX2 and FMA, checked just above.
+            // SAFETY: the CPU has AVX2 and FMA (`Level::Avx2`), checked just above.
             let fast = unsafe { avx2::inlier_sums(self, points, stride, quads) };
             let rest = self.inlier_sums_scalar(&points[(quads * 4 * stride).min(points.len())..], stride);
             return fast.plus(&rest);

@@ -113,7 +113,7 @@ fn transpose(src: &[f32], rows: usize, cols: usize, dst: &mut [f32]) {
     const T: usize = 8;
     let (src, dst) = (&src[..rows * cols], &mut dst[..rows * cols]);
     #[cfg(target_arch = "x86_64")]
-    let avx2 = std::is_x86_feature_detected!("avx2");
+    let avx2 = super::simd::level() >= super::simd::Level::Avx2;
     for r0 in (0..rows).step_by(T) {
         for c0 in (0..cols).step_by(T) {
             #[cfg(target_arch = "x86_64")]

@@ -8,6 +8,7 @@ pub mod morphology;
 pub mod normals;
 pub mod ransac;
 pub mod separable;
+pub mod simd;
 
 use super::{Images, StageTimes};
 use crate::config::PipelineConfig;
@@ -44,42 +45,9 @@ pub fn image_stages(
 /// Rows per rayon task in the per-row loops: one row is too little work to be worth a thread hop.
 pub(crate) const ROWS_PER_TASK: usize = 8;
 
-/// The four f64 lanes of an AVX vector added up, in lane order (pairs first): how the
-/// AVX2 passes that keep a sum per lane (refits, plane covariances) hand back their sums.
 #[cfg(target_arch = "x86_64")]
-#[inline]
-#[target_feature(enable = "avx2")]
-pub(crate) fn lane_sum(v: std::arch::x86_64::__m256d) -> f64 {
-    let mut l = [0.0f64; 4];
-    // SAFETY: stores 4 f64 into a local array of 4.
-    unsafe { std::arch::x86_64::_mm256_storeu_pd(l.as_mut_ptr(), v) };
-    (l[0] + l[1]) + (l[2] + l[3])
-}
-
-/// Defines `$name` to run `$portable` (an `#[inline(always)]` fn) compiled for AVX2
-/// when the CPU has it, else as compiled for the baseline target. The loops are plain
-/// Rust either way; only the width of the vectors the compiler may use differs, which
-/// doubles their throughput on x86-64 without tying the binary to one CPU.
-macro_rules! widest_simd {
-    ($(#[$meta:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? = $portable:ident) => {
-        $(#[$meta])*
-        $vis fn $name($($arg: $ty),*) $(-> $ret)? {
-            #[cfg(target_arch = "x86_64")]
-            {
-                #[target_feature(enable = "avx2")]
-                fn avx2($($arg: $ty),*) $(-> $ret)? {
-                    $portable($($arg),*)
-                }
-                if std::is_x86_feature_detected!("avx2") {
-                    // SAFETY: the CPU has AVX2, checked just above.
-                    return unsafe { avx2($($arg),*) };
-                }
-            }
-            $portable($($arg),*)
-        }
-    };
-}
-pub(crate) use widest_simd;
+pub(crate) use simd::lane_sum;
+pub(crate) use simd::widest_simd;
 
 /// Frames the stage tests share.
 #[cfg(test)]

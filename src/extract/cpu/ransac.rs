@@ -207,9 +207,9 @@ impl Moments {
 /// of the f64 sums differs.
 fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 3]) -> Moments {
     #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+    if super::simd::level() >= super::simd::Level::Avx2 {
         let (quads, rest) = points.split_at(points.len() / 4 * 4);
-        // SAFETY: the CPU has AVX2 and FMA, checked just above.
+        // SAFETY: the CPU has AVX2 and FMA (`Level::Avx2`), checked just above.
         let fast = unsafe { avx2::inlier_moments(quads, n, d, dist, o) };
         return fast.plus(inlier_moments_scalar(rest, n, d, dist, o));
     }
@@ -219,7 +219,7 @@ fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 
 /// The points within `dist` of (n, offset), and the sum of their squared distances.
 fn support(points: &[[f32; 3]], n: [f64; 3], offset: f64, dist: f64) -> (usize, f64) {
     #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx2") {
+    if super::simd::level() >= super::simd::Level::Avx2 {
         let (quads, rest) = points.split_at(points.len() / 4 * 4);
         // SAFETY: the CPU has AVX2, checked just above.
         let (count, squares) = unsafe { avx2::support(quads, n, offset, dist) };
