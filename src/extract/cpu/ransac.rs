@@ -202,30 +202,54 @@ impl Moments {
 }
 
 /// Refit's two passes go over every point of a region (a frame's refits read its points six
-/// to eight times), so on x86-64 they take four points at a time in AVX2; elsewhere, and for
-/// the last points, the scalar loops below. The same inliers either way: only the order
-/// of the f64 sums differs.
+/// to eight times), so on x86-64 they take eight points at a time in AVX-512, or four in
+/// AVX2; elsewhere, and for the last points, the scalar loops below. The same inliers
+/// either way: only the order of the f64 sums differs.
 fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 3]) -> Moments {
     #[cfg(target_arch = "x86_64")]
-    if super::simd::level() >= super::simd::Level::Avx2 {
-        let (quads, rest) = points.split_at(points.len() / 4 * 4);
-        // SAFETY: the CPU has AVX2 and FMA (`Level::Avx2`), checked just above.
-        let fast = unsafe { avx2::inlier_moments(quads, n, d, dist, o) };
-        return fast.plus(inlier_moments_scalar(rest, n, d, dist, o));
+    {
+        use super::simd::{Level, level};
+        let (fast, rest) = match level() {
+            Level::Avx512 => {
+                let (full, rest) = points.split_at(points.len() / 8 * 8);
+                // SAFETY: the CPU has AVX-512 F and VL (`Level::Avx512`).
+                (unsafe { avx512::inlier_moments(full, n, d, dist, o) }, rest)
+            }
+            Level::Avx2 => {
+                let (full, rest) = points.split_at(points.len() / 4 * 4);
+                // SAFETY: the CPU has AVX2 and FMA (`Level::Avx2`).
+                (unsafe { avx2::inlier_moments(full, n, d, dist, o) }, rest)
+            }
+            Level::Baseline => (Moments::default(), points),
+        };
+        fast.plus(inlier_moments_scalar(rest, n, d, dist, o))
     }
+    #[cfg(not(target_arch = "x86_64"))]
     inlier_moments_scalar(points, n, d, dist, o)
 }
 
 /// The points within `dist` of (n, offset), and the sum of their squared distances.
 fn support(points: &[[f32; 3]], n: [f64; 3], offset: f64, dist: f64) -> (usize, f64) {
     #[cfg(target_arch = "x86_64")]
-    if super::simd::level() >= super::simd::Level::Avx2 {
-        let (quads, rest) = points.split_at(points.len() / 4 * 4);
-        // SAFETY: the CPU has AVX2, checked just above.
-        let (count, squares) = unsafe { avx2::support(quads, n, offset, dist) };
+    {
+        use super::simd::{Level, level};
+        let ((count, squares), rest) = match level() {
+            Level::Avx512 => {
+                let (full, rest) = points.split_at(points.len() / 8 * 8);
+                // SAFETY: the CPU has AVX-512 F and VL (`Level::Avx512`).
+                (unsafe { avx512::support(full, n, offset, dist) }, rest)
+            }
+            Level::Avx2 => {
+                let (full, rest) = points.split_at(points.len() / 4 * 4);
+                // SAFETY: the CPU has AVX2 (`Level::Avx2`).
+                (unsafe { avx2::support(full, n, offset, dist) }, rest)
+            }
+            Level::Baseline => ((0, 0.0), points),
+        };
         let (more, more_squares) = support_scalar(rest, n, offset, dist);
-        return (count + more, squares + more_squares);
+        (count + more, squares + more_squares)
     }
+    #[cfg(not(target_arch = "x86_64"))]
     support_scalar(points, n, offset, dist)
 }
 
@@ -355,6 +379,100 @@ mod avx2 {
     }
 }
 
+/// Refit's passes on eight points at a time, as `avx2` does them on four: each lane sums
+/// its own points; two permutes across two registers pick each coordinate's eight values
+/// out of the 24 floats of eight x y z triples; the distances are the scalar loops'
+/// operations in the same order (no fused multiply-add).
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    use std::arch::x86_64::*;
+
+    use super::Moments;
+    use crate::extract::cpu::simd::lane_sum8;
+
+    /// The x, y and z of the eight points at `p` (24 floats).
+    ///
+    /// # Safety
+    /// The CPU has AVX-512 F and VL; 24 floats from `p` are in bounds.
+    #[inline]
+    #[target_feature(enable = "avx512f,avx512vl")]
+    unsafe fn eight_points(p: *const f32) -> [__m256; 3] {
+        // SAFETY: in bounds, as the caller promises; the loads are unaligned ones. The
+        // upper half of `b` is never picked.
+        let (a, b) = unsafe { (_mm512_loadu_ps(p), _mm512_castps256_ps512(_mm256_loadu_ps(p.add(16)))) };
+        // Index k < 16 picks a[k], 16 + k picks b[k]: coordinate c of point i is float 3i + c.
+        let pick = |c: i32| {
+            let index =
+                _mm512_setr_epi32(c, c + 3, c + 6, c + 9, c + 12, c + 15, c + 18, c + 21, 0, 0, 0, 0, 0, 0, 0, 0);
+            _mm512_castps512_ps256(_mm512_permutex2var_ps(a, index, b))
+        };
+        [pick(0), pick(1), pick(2)]
+    }
+
+    /// `inlier_moments` of a multiple of eight points.
+    ///
+    /// # Safety
+    /// The CPU has AVX-512 F and VL.
+    #[target_feature(enable = "avx512f,avx512vl")]
+    pub(super) unsafe fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 3]) -> Moments {
+        let [nx, ny, nz, d, dist] = [n[0], n[1], n[2], d, dist].map(|v| _mm256_set1_ps(v));
+        let (abs, one) = (_mm256_castsi256_ps(_mm256_set1_epi32(i32::MAX)), _mm256_set1_ps(1.0));
+        let [ox, oy, oz] = o.map(|v| _mm512_set1_pd(v));
+        let mut acc = [_mm512_setzero_pd(); 10];
+        for eight in points.chunks_exact(8) {
+            // SAFETY: a chunk of 8 points is 24 floats.
+            let [x, y, z] = unsafe { eight_points(eight.as_ptr().cast()) };
+            let e = _mm256_and_ps(
+                _mm256_add_ps(
+                    _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(nx, x), _mm256_mul_ps(ny, y)), _mm256_mul_ps(nz, z)),
+                    d,
+                ),
+                abs,
+            );
+            // 1 for an inlier, 0 for an outlier: an outlier adds zeros.
+            let w = _mm512_cvtps_pd(_mm256_and_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(e, dist), one));
+            let qx = _mm512_mul_pd(_mm512_sub_pd(_mm512_cvtps_pd(x), ox), w);
+            let qy = _mm512_mul_pd(_mm512_sub_pd(_mm512_cvtps_pd(y), oy), w);
+            let qz = _mm512_mul_pd(_mm512_sub_pd(_mm512_cvtps_pd(z), oz), w);
+            acc[0] = _mm512_add_pd(acc[0], w);
+            acc[1] = _mm512_add_pd(acc[1], qx);
+            acc[2] = _mm512_add_pd(acc[2], qy);
+            acc[3] = _mm512_add_pd(acc[3], qz);
+            acc[4] = _mm512_fmadd_pd(qx, qx, acc[4]);
+            acc[5] = _mm512_fmadd_pd(qx, qy, acc[5]);
+            acc[6] = _mm512_fmadd_pd(qx, qz, acc[6]);
+            acc[7] = _mm512_fmadd_pd(qy, qy, acc[7]);
+            acc[8] = _mm512_fmadd_pd(qy, qz, acc[8]);
+            acc[9] = _mm512_fmadd_pd(qz, qz, acc[9]);
+        }
+        let t = acc.map(|v| lane_sum8(v));
+        Moments { count: t[0], sum: [t[1], t[2], t[3]], products: [t[4], t[5], t[6], t[7], t[8], t[9]] }
+    }
+
+    /// `support` of a multiple of eight points.
+    ///
+    /// # Safety
+    /// The CPU has AVX-512 F and VL.
+    #[target_feature(enable = "avx512f,avx512vl")]
+    pub(super) unsafe fn support(points: &[[f32; 3]], n: [f64; 3], offset: f64, dist: f64) -> (usize, f64) {
+        let [nx, ny, nz, offset, dist] = [n[0], n[1], n[2], offset, dist].map(|v| _mm512_set1_pd(v));
+        let (mut count, mut squares) = (0u32, _mm512_setzero_pd());
+        for eight in points.chunks_exact(8) {
+            // SAFETY: a chunk of 8 points is 24 floats.
+            let [x, y, z] = unsafe { eight_points(eight.as_ptr().cast()) }.map(|v| _mm512_cvtps_pd(v));
+            let r = _mm512_add_pd(
+                _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(nx, x), _mm512_mul_pd(ny, y)), _mm512_mul_pd(nz, z)),
+                offset,
+            );
+            let e = _mm512_abs_pd(r);
+            let inlier = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(e, dist);
+            count += inlier.count_ones();
+            squares = _mm512_mask_add_pd(squares, inlier, squares, _mm512_mul_pd(e, e));
+        }
+        (count as usize, lane_sum8(squares))
+    }
+}
+
 /// RANSAC then refit for every region: the whole CPU stage.
 pub fn fit_planes(batch: &PointBatch, hypotheses: u32, inlier_distance: f32) -> Vec<Option<PlaneFit>> {
     let scores = score_hypotheses(batch, hypotheses, inlier_distance);
@@ -436,7 +554,8 @@ mod tests {
         let (n, d, dist) = ([0.2f32, -0.7, -0.685], 1.6f32, 0.01f32);
         let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
         let (n, d) = (n.map(|c| c / len), d / len);
-        for size in [0usize, 1, 3, 4, 5, 8, 11, 4096, 30_001] {
+        // Every remainder of the lanes (4 or 8), and long runs.
+        for size in (0usize..=17).chain([4096, 30_001]) {
             let points: Vec<[f32; 3]> = (0..size)
                 .map(|i| {
                     let (x, y) = (rng.random_range(-1.0f32..1.0), rng.random_range(-0.5f32..0.8));
