@@ -81,16 +81,14 @@ pub(crate) fn lane_sum(v: std::arch::x86_64::__m256d) -> f64 {
     (l[0] + l[1]) + (l[2] + l[3])
 }
 
-/// The eight f64 lanes of an AVX-512 vector added up, in lane order (pairs, then quads):
-/// `lane_sum`'s order for twice the lanes.
+/// The eight f64 lanes of an AVX-512 vector added up: each half by `lane_sum`, then the
+/// two (pairs, then quads, as `lane_sum` orders four lanes).
 #[cfg(target_arch = "x86_64")]
 #[inline]
 #[target_feature(enable = "avx512f")]
 pub(crate) fn lane_sum8(v: std::arch::x86_64::__m512d) -> f64 {
-    let mut l = [0.0f64; 8];
-    // SAFETY: stores 8 f64 into a local array of 8.
-    unsafe { std::arch::x86_64::_mm512_storeu_pd(l.as_mut_ptr(), v) };
-    ((l[0] + l[1]) + (l[2] + l[3])) + ((l[4] + l[5]) + (l[6] + l[7]))
+    use std::arch::x86_64::{_mm512_castpd512_pd256, _mm512_extractf64x4_pd};
+    lane_sum(_mm512_castpd512_pd256(v)) + lane_sum(_mm512_extractf64x4_pd::<1>(v))
 }
 
 /// Defines `$name` to run `$portable` (an `#[inline(always)]` fn) compiled for the
