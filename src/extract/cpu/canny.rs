@@ -11,31 +11,26 @@ use std::ops::Range;
 use rayon::prelude::*;
 
 use super::components::hysteresis;
+use super::normals::NormalPlanes;
 use super::{ROWS_PER_TASK, widest_simd};
 use crate::grid::{Grid, busy_blocks};
 
 /// Gradient of the normal field: (magnitude, NMS sector 0..4) per pixel; sector 4 marks
 /// a pixel whose 3x3 neighbourhood lacks a normal, or on the image's border (magnitude 0
-/// there). The fast loop: the normals are split into planes of x, y, z and validity once,
-/// then each row is one pass of plain slice arithmetic over the three rows around it, so
-/// it vectorises. Sums in the order of `gradient_at` (and of shaders/gradient.wgsl): the
+/// there). The fast loop reads the normals as planes of x, y, z and validity (`NormalPlanes`,
+/// which the normals stage writes beside the interleaved normals), so that each row is one
+/// pass of plain slice arithmetic over the three rows around it, and vectorises. Sums in the order of `gradient_at` (and of shaders/gradient.wgsl): the
 /// results are the same bits.
 pub fn normal_gradient(normals: &Grid<[f32; 3]>) -> Grid<(f32, u8)> {
-    let (w, h) = (normals.width, normals.height);
+    gradient_of_planes(&NormalPlanes::of(normals))
+}
+
+/// `normal_gradient` of normals already split into planes (as the normals stage hands them on).
+pub fn gradient_of_planes(planes: &NormalPlanes) -> Grid<(f32, u8)> {
+    let (w, h) = (planes.width, planes.height);
     let mut data = vec![(0.0f32, 4u8); w * h];
     if w >= 3 && h >= 3 {
-        // Row v of `planes` is [x; w] [y; w] [z; w] [1 where a normal, else 0; w].
-        let mut planes = vec![0.0f32; 4 * w * h];
-        planes.par_chunks_mut(4 * w).zip(normals.data.par_chunks(w)).with_min_len(ROWS_PER_TASK).for_each(
-            |(planes, row)| {
-                for (u, n) in row.iter().enumerate() {
-                    planes[u] = n[0];
-                    planes[w + u] = n[1];
-                    planes[2 * w + u] = n[2];
-                    planes[3 * w + u] = f32::from(u8::from(*n != [0.0; 3]));
-                }
-            },
-        );
+        let planes = &planes.data;
         data.par_chunks_mut(w).enumerate().with_min_len(ROWS_PER_TASK).for_each_init(
             || (vec![0.0f32; 8 * w], vec![0u8; w]),
             |(scratch, sectors), (v, out)| {

@@ -26,9 +26,9 @@ pub fn image_stages(
     let smoothed =
         diffusion::diffuse(depth, cfg.diffusion_time as f32, cfg.diffusion_steps, cfg.diffusion_kappa_m as f32);
     times.diffusion = lap();
-    let normals = normals::normals(&smoothed, intr, cfg.normal_kernel);
+    let (normals, planes) = normals::normals_and_planes(&smoothed, intr, cfg.normal_kernel);
     times.normals = lap();
-    let class = canny::classify(&canny::normal_gradient(&normals), cfg.canny_low as f32, cfg.canny_high as f32);
+    let class = canny::classify(&canny::gradient_of_planes(&planes), cfg.canny_low as f32, cfg.canny_high as f32);
     let canny = components::hysteresis(&class);
     let boundary = boundary::boundary(
         &canny,

@@ -26,6 +26,39 @@ pub fn sobel_kernel(size: u32) -> (&'static [f32], &'static [f32], f32) {
 
 /// Unit normals in the camera frame, [0, 0, 0] where not every tap is valid.
 pub fn normals(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32) -> Grid<[f32; 3]> {
+    normals_and_planes(depth, intr, kernel).0
+}
+
+/// Normals as planes, for the gradient: row v is [x; w] [y; w] [z; w] [1 where a normal,
+/// else 0; w], so each of the gradient's row loops runs over plain slices and vectorises.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NormalPlanes {
+    pub width: usize,
+    pub height: usize,
+    pub data: Vec<f32>,
+}
+
+impl NormalPlanes {
+    /// The planes of interleaved normals (the normals stage writes both at once).
+    pub fn of(normals: &Grid<[f32; 3]>) -> NormalPlanes {
+        let w = normals.width;
+        let mut data = vec![0.0f32; 4 * w * normals.height];
+        data.par_chunks_mut(4 * w).zip(normals.data.par_chunks(w)).with_min_len(ROWS_PER_TASK).for_each(
+            |(planes, row)| {
+                for (u, n) in row.iter().enumerate() {
+                    planes[u] = n[0];
+                    planes[w + u] = n[1];
+                    planes[2 * w + u] = n[2];
+                    planes[3 * w + u] = f32::from(u8::from(*n != [0.0; 3]));
+                }
+            },
+        );
+        NormalPlanes { width: w, height: normals.height, data }
+    }
+}
+
+/// `normals`, and the same normals as planes, in one pass.
+pub fn normals_and_planes(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32) -> (Grid<[f32; 3]>, NormalPlanes) {
     let (w, h) = (depth.width, depth.height);
     let (smooth, deriv, norm) = sobel_kernel(kernel);
     let r = smooth.len() / 2;
@@ -37,28 +70,48 @@ pub fn normals(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32) -> Grid<[f32; 
     let invalid = Grid { width: w, height: h, data: z.iter().map(|&z| u8::from(z == 0.0)).collect() };
     let spoiled = morphology::dilate(&invalid, r, 1);
     let mut data = vec![[0.0f32; 3]; w * h];
-    data.par_chunks_mut(w).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, out)| {
-        let row = v * w..(v + 1) * w;
-        let camera = [fx, fy, cx, cy, norm, v as f32];
-        normals_row(&z[row.clone()], &zu[row.clone()], &zv[row.clone()], &spoiled.data[row], out, camera);
-    });
-    Grid { width: w, height: h, data }
+    let mut planes = vec![0.0f32; 4 * w * h];
+    data.par_chunks_mut(w).zip(planes.par_chunks_mut(4 * w)).enumerate().with_min_len(ROWS_PER_TASK).for_each(
+        |(v, (out, planes))| {
+            let row = v * w..(v + 1) * w;
+            let camera = [fx, fy, cx, cy, norm, v as f32];
+            normals_row(&z[row.clone()], &zu[row.clone()], &zv[row.clone()], &spoiled.data[row], out, planes, camera);
+        },
+    );
+    (Grid { width: w, height: h, data }, NormalPlanes { width: w, height: h, data: planes })
 }
 
 super::widest_simd! {
-    /// One row of normals: `camera` is [fx, fy, cx, cy, the Sobel norm, the row's v].
-    fn normals_row(z: &[f32], zu: &[f32], zv: &[f32], spoiled: &[u8], out: &mut [[f32; 3]], camera: [f32; 6]) = normals_row_portable
+    /// One row of normals, interleaved into `out` and as four planes into `planes` (4w);
+    /// `camera` is [fx, fy, cx, cy, the Sobel norm, the row's v].
+    fn normals_row(z: &[f32], zu: &[f32], zv: &[f32], spoiled: &[u8], out: &mut [[f32; 3]], planes: &mut [f32], camera: [f32; 6]) = normals_row_portable
 }
 
 /// Equal-length slices and a branch-free `surface_normal`: the loop vectorises.
 #[inline(always)]
-fn normals_row_portable(z: &[f32], zu: &[f32], zv: &[f32], spoiled: &[u8], out: &mut [[f32; 3]], camera: [f32; 6]) {
+fn normals_row_portable(
+    z: &[f32],
+    zu: &[f32],
+    zv: &[f32],
+    spoiled: &[u8],
+    out: &mut [[f32; 3]],
+    planes: &mut [f32],
+    camera: [f32; 6],
+) {
     let [fx, fy, cx, cy, norm, v] = camera;
     let n = out.len();
     let (z, zu, zv, spoiled) = (&z[..n], &zu[..n], &zv[..n], &spoiled[..n]);
+    let (x, rest) = planes[..4 * n].split_at_mut(n);
+    let (y, rest) = rest.split_at_mut(n);
+    let (zn, valid) = rest.split_at_mut(n);
+    let (x, y, zn, valid) = (&mut x[..n], &mut y[..n], &mut zn[..n], &mut valid[..n]);
     for u in 0..n {
         let normal = surface_normal(z[u], zu[u] / norm, zv[u] / norm, u as f32, v, fx, fy, cx, cy);
-        out[u] = if spoiled[u] == 0 { normal } else { [0.0; 3] };
+        let normal = if spoiled[u] == 0 { normal } else { [0.0; 3] };
+        out[u] = normal;
+        (x[u], y[u], zn[u]) = (normal[0], normal[1], normal[2]);
+        // `|`, not `!=` on the arrays (which stops at the first difference): no branches.
+        valid[u] = f32::from(u8::from((normal[0] != 0.0) | (normal[1] != 0.0) | (normal[2] != 0.0)));
     }
 }
 
@@ -128,7 +181,8 @@ mod tests {
             .collect();
         let depth = Grid { width: w, height: intr.height as usize, data };
         for kernel in [3, 5, 7] {
-            let fast = normals(&depth, &intr, kernel);
+            let (fast, planes) = normals_and_planes(&depth, &intr, kernel);
+            assert_eq!(planes, NormalPlanes::of(&fast), "kernel {kernel}: the planes are the normals");
             for v in 0..depth.height {
                 for u in 0..w {
                     let want = normal_at(&depth, &intr, kernel, u, v);
