@@ -69,10 +69,15 @@ pub fn boundary(
     Grid { width: w, height: h, data: out }
 }
 
-/// 1 in `out` where the depth steps to a 4-neighbour by more than `ratio` times the depth
-/// (both valid); `above` and `below` are the neighbouring rows, empty beyond the image.
+super::widest_simd! {
+    /// 1 in `out` where the depth steps to a 4-neighbour by more than `ratio` times the depth
+    /// (both valid); `above` and `below` are the neighbouring rows, empty beyond the image.
+    fn depth_steps(row: &[f32], above: &[f32], below: &[f32], out: &mut [u8], ratio: f32) = depth_steps_portable
+}
+
 /// Whole-row comparisons, so the loops vectorise.
-fn depth_steps(row: &[f32], above: &[f32], below: &[f32], out: &mut [u8], ratio: f32) {
+#[inline(always)]
+fn depth_steps_portable(row: &[f32], above: &[f32], below: &[f32], out: &mut [u8], ratio: f32) {
     // `&`, not `&&`: no branches, so the loops vectorise.
     let jump = |z: f32, q: f32| u8::from((z != 0.0) & (q != 0.0) & ((q - z).abs() > ratio * z));
     out.fill(0);
