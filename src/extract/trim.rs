@@ -52,7 +52,7 @@ pub fn trim_at_neighbour_planes(
                 continue;
             }
             let pts = &points[a];
-            let strays = pts.iter().filter(|p| side * f(&p.map(f64::from)) < -dist).count();
+            let strays = count_beyond(pts, n.into(), d, side, dist);
             if pts.is_empty() || strays as f64 > STRAY_SHARE * pts.len() as f64 {
                 tracing::debug!(
                     "polygon {a} crosses the plane of polygon {b}: {strays} of {} points beyond it",
@@ -77,4 +77,20 @@ pub fn trim_at_neighbour_planes(
                 .unzip();
         }
     });
+}
+
+crate::extract::cpu::widest_simd! {
+    /// How many points lie more than `dist` beyond the plane (n, d) from the `side` (1 or -1)
+    /// a polygon is on: a cut's strays, over all of a region's points.
+    fn count_beyond(points: &[[f32; 3]], n: [f64; 3], d: f64, side: f64, dist: f64) -> usize = count_beyond_portable
+}
+
+/// `side * (n . p + d) < -dist`, written out (as `f` in `trim_at_neighbour_planes` is) in
+/// plain arithmetic, so the loop vectorises.
+#[inline(always)]
+fn count_beyond_portable(points: &[[f32; 3]], n: [f64; 3], d: f64, side: f64, dist: f64) -> usize {
+    points
+        .iter()
+        .map(|p| usize::from(side * (n[0] * p[0] as f64 + n[1] * p[1] as f64 + n[2] * p[2] as f64 + d) < -dist))
+        .sum()
 }
