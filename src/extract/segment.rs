@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use super::Grid;
 use super::cloud::Cloud;
 use super::cpu::ransac::{PlaneFit, PointBatch, refit};
-use crate::grid::{busy_blocks, component_runs, flood, runs};
+use crate::grid::{component_runs, flood, runs};
 
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
 #[derive(Clone, Debug)]
@@ -205,35 +205,10 @@ impl Segmentation {
         // did not join in one wave can only join in the next through a neighbour that did:
         // after the first, each wave looks at those pixels only.
         let mut candidates: Vec<u32> = Vec::new();
-        let labels = &self.labels.data;
+        let mut beside = vec![0u8; w];
         for v in 0..h {
-            let row = &labels[v * w..(v + 1) * w];
-            let (up, down) = ((v > 0).then(|| &labels[(v - 1) * w..v * w]), labels.get((v + 1) * w..(v + 2) * w));
-            // Rows beyond the image: the row itself stands in (an unlabelled pixel's own label is 0).
-            let (above, below) = (up.unwrap_or(row), down.unwrap_or(row));
-            // Blocks inside a region or away from any are passed over; the image's first
-            // and last block are taken pixel by pixel.
-            let border = |block: Range<usize>| {
-                let (u0, u1) = (block.start, block.end);
-                if u0 == 0 || u1 == w {
-                    return true;
-                }
-                let sides = row[u0 - 1..].iter().zip(&row[u0 + 1..]);
-                let ends = above[u0..].iter().zip(&below[u0..]);
-                row[block].iter().zip(sides).zip(ends).fold(false, |any, ((&x, (&l, &r)), (&a, &b))| {
-                    any | ((x == 0) & ((l != 0) | (r != 0) | (a != 0) | (b != 0)))
-                })
-            };
-            for u in busy_blocks(w, border).flatten() {
-                if row[u] == 0
-                    && ((u > 0 && row[u - 1] != 0)
-                        || (u + 1 < w && row[u + 1] != 0)
-                        || up.is_some_and(|r| r[u] != 0)
-                        || down.is_some_and(|r| r[u] != 0))
-                {
-                    candidates.push(pack((u, v)));
-                }
-            }
+            unlabelled_beside_labelled(&self.labels, v, &mut beside);
+            for_each_set(&beside, |u| candidates.push(pack((u, v))));
         }
         let mut queued = vec![false; w * h];
         for _ in 0..waves {
@@ -296,6 +271,75 @@ impl Segmentation {
     fn pixels_from_labels(&mut self) {
         self.pixels.iter_mut().for_each(Vec::clear);
         push_pixels(&self.labels.data, &mut self.pixels);
+    }
+}
+
+crate::extract::cpu::widest_simd! {
+    /// 1 in `out` (w long) where pixel (u, v) is unlabelled and a 4-neighbour is labelled.
+    fn unlabelled_beside_labelled(labels: &Grid<u32>, v: usize, out: &mut [u8]) = unlabelled_beside_labelled_portable
+}
+
+/// Whole rows at a time, comparisons combined with `&` and `|`: the loop vectorises.
+#[inline(always)]
+fn unlabelled_beside_labelled_portable(labels: &Grid<u32>, v: usize, out: &mut [u8]) {
+    let (w, h) = (labels.width, labels.height);
+    let row = &labels.data[v * w..(v + 1) * w];
+    // Rows beyond the image: the row itself stands in (an unlabelled pixel's own label is 0).
+    let above = if v > 0 { &labels.data[(v - 1) * w..v * w] } else { row };
+    let below = if v + 1 < h { &labels.data[(v + 1) * w..(v + 2) * w] } else { row };
+    let out = &mut out[..w];
+    for u in 0..w {
+        out[u] = u8::from((row[u] == 0) & ((above[u] != 0) | (below[u] != 0)));
+    }
+    // Left and right neighbours (zip stops at the row's end).
+    for ((o, &x), &right) in out.iter_mut().zip(row).zip(&row[1..]) {
+        *o |= u8::from((x == 0) & (right != 0));
+    }
+    for ((o, &x), &left) in out[1..].iter_mut().zip(&row[1..]).zip(row) {
+        *o |= u8::from((x == 0) & (left != 0));
+    }
+}
+
+crate::extract::cpu::widest_simd! {
+    /// 1 in `out` (w long) where pixel (u, v) is labelled and its left or upper neighbour
+    /// has another label (or none): where a row or a column enters a region.
+    fn labelled_after_another(labels: &Grid<u32>, v: usize, out: &mut [u8]) = labelled_after_another_portable
+}
+
+/// Whole rows at a time, as `unlabelled_beside_labelled_portable`.
+#[inline(always)]
+fn labelled_after_another_portable(labels: &Grid<u32>, v: usize, out: &mut [u8]) {
+    let w = labels.width;
+    let row = &labels.data[v * w..(v + 1) * w];
+    // Row 0 has nothing above, pixel 0 nothing left: the pixel itself stands in, never differing.
+    let above = if v > 0 { &labels.data[(v - 1) * w..v * w] } else { row };
+    let out = &mut out[..w];
+    for u in 0..w {
+        out[u] = u8::from((row[u] != 0) & (row[u] != above[u]));
+    }
+    for ((o, &x), &left) in out[1..].iter_mut().zip(&row[1..]).zip(row) {
+        *o |= u8::from((x != 0) & (x != left));
+    }
+}
+
+/// Calls `f` with the index of every non-zero byte of `mask`, ascending; eight bytes at a
+/// time, so stretches of zeros cost a test per eight.
+fn for_each_set(mask: &[u8], mut f: impl FnMut(usize)) {
+    let words = mask.chunks_exact(8);
+    let tail = words.remainder();
+    for (k, word) in words.enumerate() {
+        let mut bits = u64::from_le_bytes(word.try_into().expect("eight bytes"));
+        while bits != 0 {
+            let byte = bits.trailing_zeros() as usize / 8;
+            f(8 * k + byte);
+            bits &= !(0xff << (8 * byte));
+        }
+    }
+    let start = mask.len() - tail.len();
+    for (j, &m) in tail.iter().enumerate() {
+        if m != 0 {
+            f(start + j);
+        }
     }
 }
 
@@ -380,33 +424,17 @@ impl Segmentation {
         let nearest = |j: usize, stride: usize, room: usize| {
             (1..=room.min(max_gap + 1)).map(|k| (j - k * stride, k)).find(|&(i, _)| l[i] != 0)
         };
+        let mut changes = vec![0u8; w];
         for v in 0..h {
-            let row = &l[v * w..(v + 1) * w];
-            // Row 0 has nothing above: itself stands in, never differing.
-            let up = if v > 0 { &l[(v - 1) * w..v * w] } else { row };
-            // Most labelled pixels have the same label left and above: blocks without a
-            // change are passed over; the first block of a row is taken pixel by pixel.
-            let changes = |block: Range<usize>| {
-                let u0 = block.start;
-                u0 == 0
-                    || row[block]
-                        .iter()
-                        .zip(&row[u0 - 1..])
-                        .zip(&up[u0..])
-                        .fold(false, |any, ((&x, &left), &above)| any | ((x != 0) & ((x != left) | (x != above))))
-            };
-            for u in busy_blocks(w, changes).flatten() {
+            labelled_after_another(&self.labels, v, &mut changes);
+            for_each_set(&changes, |u| {
                 let j = v * w + u;
-                let x = l[j];
-                if x == 0 || ((u == 0 || l[j - 1] == x) && (v == 0 || l[j - w] == x)) {
-                    continue;
-                }
                 for (stride, room) in [(1, u), (w, v)] {
                     if let Some((i, px)) = nearest(j, stride, room) {
                         step(i, j, px);
                     }
                 }
-            }
+            });
         }
         steps.sort_unstable();
         let mut counted: Vec<((u32, u32), u32)> = Vec::new();
@@ -626,5 +654,71 @@ impl PlaneFit {
 
     pub fn normal_f32(&self) -> [f32; 3] {
         [self.normal.x as f32, self.normal.y as f32, self.normal.z as f32]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::extract::cpu::ransac::hash;
+
+    #[test]
+    fn row_scans_are_the_pixel_by_pixel_ones() {
+        // Labels in blobs and specks, 0 between, on widths that leave every remainder of
+        // the eight-byte words and of the vectors.
+        for (w, h) in [(1, 1), (1, 5), (7, 3), (37, 29), (70, 11)] {
+            let labels = Grid {
+                width: w,
+                height: h,
+                data: (0..w * h)
+                    .map(|i| {
+                        let (u, v) = ((i % w) as u32, (i / w) as u32);
+                        if hash(u / 5 + 97 * (v / 4)) % 3 == 0 || hash(i as u32) % 11 == 0 { 1 + u / 9 } else { 0 }
+                    })
+                    .collect(),
+            };
+            let at = |u: isize, v: isize| {
+                if u < 0 || v < 0 || u >= w as isize || v >= h as isize {
+                    0
+                } else {
+                    labels.data[v as usize * w + u as usize]
+                }
+            };
+            let mut want = Vec::new();
+            for v in 0..h as isize {
+                for u in 0..w as isize {
+                    if at(u, v) == 0
+                        && [(-1, 0), (1, 0), (0, -1), (0, 1)].iter().any(|(du, dv)| at(u + du, v + dv) != 0)
+                    {
+                        want.push((u as usize, v as usize));
+                    }
+                }
+            }
+            // Where a row or a column enters a region (the creases' and joins' scan).
+            let mut entries = Vec::new();
+            for v in 0..h as isize {
+                for u in 0..w as isize {
+                    let x = at(u, v);
+                    if x != 0 && ((u > 0 && at(u - 1, v) != x) || (v > 0 && at(u, v - 1) != x)) {
+                        entries.push((u as usize, v as usize));
+                    }
+                }
+            }
+            let (mut got, mut got_entries) = (Vec::new(), Vec::new());
+            let mut mask = vec![0u8; w];
+            for v in 0..h {
+                unlabelled_beside_labelled(&labels, v, &mut mask);
+                for_each_set(&mask, |u| got.push((u, v)));
+                labelled_after_another(&labels, v, &mut mask);
+                for_each_set(&mask, |u| got_entries.push((u, v)));
+            }
+            assert_eq!(got, want, "{w} x {h}");
+            assert_eq!(got_entries, entries, "{w} x {h}");
+            assert!(w * h < 100 || (want.len() > 20 && entries.len() > 20), "{w} x {h}: borders to find");
+        }
+        // Any non-zero byte counts, in a word and in the tail.
+        let mut set = Vec::new();
+        for_each_set(&[0, 3, 0, 0, 0, 0, 0, 255, 9, 0, 128], |i| set.push(i));
+        assert_eq!(set, [1, 7, 8, 10]);
     }
 }
