@@ -673,7 +673,11 @@ mod tests {
                 data: (0..w * h)
                     .map(|i| {
                         let (u, v) = ((i % w) as u32, (i / w) as u32);
-                        if hash(u / 5 + 97 * (v / 4)) % 3 == 0 || hash(i as u32) % 11 == 0 { 1 + u / 9 } else { 0 }
+                        if hash(u / 5 + 97 * (v / 4)).is_multiple_of(3) || hash(i as u32).is_multiple_of(11) {
+                            1 + u / 9
+                        } else {
+                            0
+                        }
                     })
                     .collect(),
             };
