@@ -1,8 +1,6 @@
 //! Row-major pixel grids and their connected components, for extraction, the map's
 //! clearing and the evaluation alike.
 
-use std::ops::Range;
-
 /// A row-major image of any pixel type.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Grid<T> {
@@ -50,15 +48,27 @@ pub fn runs(pixels: &[u32], w: usize) -> impl Iterator<Item = Run> + '_ {
     })
 }
 
-/// Pixels along a row that `busy_blocks` hands out, or passes over, at once.
-pub const BLOCK_PX: usize = 32;
-
-/// The column ranges of a row `w` wide, `BLOCK_PX` at a time, where `busy` says there may
-/// be work: a scan whose work lies on a few pixels of most rows (edges, region borders)
-/// passes over the rest a block at a time, with a test that vectorises, instead of a
-/// branch per pixel.
-pub fn busy_blocks(w: usize, busy: impl Fn(Range<usize>) -> bool) -> impl Iterator<Item = Range<usize>> {
-    (0..w).step_by(BLOCK_PX).map(move |u0| u0..(u0 + BLOCK_PX).min(w)).filter(move |block| busy(block.clone()))
+/// Calls `f` with the index of every non-zero byte of `mask`, ascending; eight bytes at a
+/// time, so stretches of zeros cost a test per eight. A scan whose work lies on a few
+/// pixels of most rows (edges, region borders) marks them in a mask a whole row at a time,
+/// with comparisons that vectorise, then visits only those.
+pub fn for_each_set(mask: &[u8], mut f: impl FnMut(usize)) {
+    let words = mask.chunks_exact(8);
+    let tail = words.remainder();
+    for (k, word) in words.enumerate() {
+        let mut bits = u64::from_le_bytes(word.try_into().expect("eight bytes"));
+        while bits != 0 {
+            let byte = bits.trailing_zeros() as usize / 8;
+            f(8 * k + byte);
+            bits &= !(0xff << (8 * byte));
+        }
+    }
+    let start = mask.len() - tail.len();
+    for (j, &m) in tail.iter().enumerate() {
+        if m != 0 {
+            f(start + j);
+        }
+    }
 }
 
 /// The 8-connected set of pixels reachable from `start` through pixels where `inside`

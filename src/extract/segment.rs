@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use super::Grid;
 use super::cloud::Cloud;
 use super::cpu::ransac::{PlaneFit, PointBatch, refit};
-use crate::grid::{component_runs, flood, runs};
+use crate::grid::{component_runs, flood, for_each_set, runs};
 
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
 #[derive(Clone, Debug)]
@@ -319,27 +319,6 @@ fn labelled_after_another_portable(labels: &Grid<u32>, v: usize, out: &mut [u8])
     }
     for ((o, &x), &left) in out[1..].iter_mut().zip(&row[1..]).zip(row) {
         *o |= u8::from((x != 0) & (x != left));
-    }
-}
-
-/// Calls `f` with the index of every non-zero byte of `mask`, ascending; eight bytes at a
-/// time, so stretches of zeros cost a test per eight.
-fn for_each_set(mask: &[u8], mut f: impl FnMut(usize)) {
-    let words = mask.chunks_exact(8);
-    let tail = words.remainder();
-    for (k, word) in words.enumerate() {
-        let mut bits = u64::from_le_bytes(word.try_into().expect("eight bytes"));
-        while bits != 0 {
-            let byte = bits.trailing_zeros() as usize / 8;
-            f(8 * k + byte);
-            bits &= !(0xff << (8 * byte));
-        }
-    }
-    let start = mask.len() - tail.len();
-    for (j, &m) in tail.iter().enumerate() {
-        if m != 0 {
-            f(start + j);
-        }
     }
 }
 

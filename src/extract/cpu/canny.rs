@@ -6,14 +6,12 @@
 //! thresholds (`components`). Directions are chosen by comparisons, not angles, so both
 //! twins pick the same neighbours.
 
-use std::ops::Range;
-
 use rayon::prelude::*;
 
 use super::components::hysteresis;
 use super::normals::NormalPlanes;
 use super::{ROWS_PER_TASK, widest_simd};
-use crate::grid::{Grid, busy_blocks};
+use crate::grid::{Grid, for_each_set};
 
 /// Gradient of the normal field: (magnitude, NMS sector 0..4) per pixel; sector 4 marks
 /// a pixel whose 3x3 neighbourhood lacks a normal, or on the image's border (magnitude 0
@@ -152,18 +150,28 @@ pub fn canny(grad: &Grid<(f32, u8)>, low: f32, high: f32) -> Grid<u8> {
 pub fn classify(grad: &Grid<(f32, u8)>, low: f32, high: f32) -> Grid<u8> {
     let w = grad.width;
     let mut class = vec![0u8; w * grad.height];
-    class.par_chunks_mut(w).enumerate().for_each(|(v, out)| {
-        let row = &grad.data[v * w..(v + 1) * w];
-        // Most of a frame is flat: a block with no magnitude at `low` or over stays 0, as
-        // `suppressed_class` would leave each of its pixels.
-        let edgy = |block: Range<usize>| row[block].iter().fold(false, |any, &(m, _)| any | (m >= low));
-        for block in busy_blocks(w, edgy) {
-            for u in block {
-                out[u] = suppressed_class(grad, u, v, low, high);
-            }
-        }
-    });
+    class.par_chunks_mut(w).enumerate().for_each_init(
+        || vec![0u8; w],
+        |edgy, (v, out)| {
+            // Most of a frame is flat: a pixel with a magnitude under `low` stays 0, as
+            // `suppressed_class` would leave it; the others are found a whole row at a time.
+            at_least(&grad.data[v * w..(v + 1) * w], low, edgy);
+            for_each_set(edgy, |u| out[u] = suppressed_class(grad, u, v, low, high));
+        },
+    );
     Grid { width: w, height: grad.height, data: class }
+}
+
+widest_simd! {
+    /// 1 in `out` where the magnitude is `low` or more.
+    fn at_least(row: &[(f32, u8)], low: f32, out: &mut [u8]) = at_least_portable
+}
+
+#[inline(always)]
+fn at_least_portable(row: &[(f32, u8)], low: f32, out: &mut [u8]) {
+    for (o, &(m, _)) in out.iter_mut().zip(row) {
+        *o = u8::from(m >= low);
+    }
 }
 
 /// classify.wgsl at pixel (u, v), the oracle: 0, 1 (weak) or 2 (strong) after non-maximum suppression.
