@@ -15,9 +15,10 @@ use crate::grid::{Grid, for_each_set};
 
 /// Gradient of the normal field: (magnitude, NMS sector 0..4) per pixel; sector 4 marks
 /// a pixel whose 3x3 neighbourhood lacks a normal, or on the image's border (magnitude 0
-/// there). The fast loop reads the normals as planes of x, y, z and validity (`NormalPlanes`,
-/// which the normals stage writes beside the interleaved normals), so that each row is one
-/// pass of plain slice arithmetic over the three rows around it, and vectorises. Sums in the order of `gradient_at` (and of shaders/gradient.wgsl): the
+/// there). The fast loop reads the normals as planes of x, y, z and validity
+/// (`NormalPlanes`, which the normals stage writes beside the interleaved normals), so
+/// that each row is one pass of plain slice arithmetic over the three rows around it, and
+/// vectorises. Sums in the order of `gradient_at` (and of shaders/gradient.wgsl): the
 /// results are the same bits.
 pub fn normal_gradient(normals: &Grid<[f32; 3]>) -> Grid<(f32, u8)> {
     gradient_of_planes(&NormalPlanes::of(normals))
