@@ -191,16 +191,6 @@ impl Segmentation {
         // its neighbours and cell, most of the growth's time.
         let pack = |(u, v): (usize, usize)| (v << 16 | u) as u32;
         let unpack = |c: u32| ((c & 0xffff) as usize, (c >> 16) as usize);
-        let neighbours = |(u, v): (usize, usize)| {
-            [
-                (u > 0).then(|| (u - 1, v)),
-                (u + 1 < w).then(|| (u + 1, v)),
-                (v > 0).then(|| (u, v - 1)),
-                (v + 1 < h).then(|| (u, v + 1)),
-            ]
-            .into_iter()
-            .flatten()
-        };
         // The first wave's candidates: unlabelled pixels beside a labelled one. A pixel that
         // did not join in one wave can only join in the next through a neighbour that did:
         // after the first, each wave looks at those pixels only.
@@ -210,8 +200,9 @@ impl Segmentation {
             unlabelled_beside_labelled(&self.labels, v, &mut beside);
             for_each_set(&beside, |u| candidates.push(pack((u, v))));
         }
-        let mut queued = vec![false; w * h];
-        for _ in 0..waves {
+        // The wave that last queued each pixel: a wave's mark needs no clearing for the next.
+        let mut queued = vec![0u32; w * h];
+        for wave in 1..=waves {
             let labels = &self.labels.data;
             let joins: Vec<(u32, u32)> = candidates
                 .par_iter()
@@ -251,16 +242,21 @@ impl Segmentation {
             }
             candidates.clear();
             for &(c, _) in &joins {
-                for (u, v) in neighbours(unpack(c)) {
-                    let j = v * w + u;
-                    if self.labels.data[j] == 0 && !std::mem::replace(&mut queued[j], true) {
-                        candidates.push(pack((u, v)));
+                let (u, v) = unpack(c);
+                let i = v * w + u;
+                // The 4-neighbours left, right, up and down: index, and packed as v << 16 | u.
+                let neighbours = [
+                    (u > 0, i.wrapping_sub(1), c.wrapping_sub(1)),
+                    (u + 1 < w, i + 1, c + 1),
+                    (v > 0, i.wrapping_sub(w), c.wrapping_sub(1 << 16)),
+                    (v + 1 < h, i + w, c + (1 << 16)),
+                ];
+                for (inside, j, packed) in neighbours {
+                    if inside && self.labels.data[j] == 0 && queued[j] != wave {
+                        queued[j] = wave;
+                        candidates.push(packed);
                     }
                 }
-            }
-            for &c in &candidates {
-                let (u, v) = unpack(c);
-                queued[v * w + u] = false;
             }
         }
         self.pixels_from_labels();
