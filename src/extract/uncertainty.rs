@@ -283,7 +283,7 @@ mod avx2 {
     use std::arch::x86_64::*;
 
     use super::{InlierSums, PlaneFrame};
-    use crate::extract::cpu::lane_sum;
+    use crate::extract::cpu::simd::lane_sum;
 
     /// The sums over the first `quads` groups of four of every `stride`-th point.
     ///

@@ -45,8 +45,6 @@ pub fn image_stages(
 /// Rows per rayon task in the per-row loops: one row is too little work to be worth a thread hop.
 pub(crate) const ROWS_PER_TASK: usize = 8;
 
-#[cfg(target_arch = "x86_64")]
-pub(crate) use simd::lane_sum;
 pub(crate) use simd::widest_simd;
 
 /// Frames the stage tests share.

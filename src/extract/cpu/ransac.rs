@@ -208,19 +208,13 @@ impl Moments {
 fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 3]) -> Moments {
     #[cfg(target_arch = "x86_64")]
     {
-        use super::simd::{Level, level};
-        let (fast, rest) = match level() {
-            Level::Avx512 => {
-                let (full, rest) = points.split_at(points.len() / 8 * 8);
-                // SAFETY: the CPU has AVX-512 F and VL (`Level::Avx512`).
-                (unsafe { avx512::inlier_moments(full, n, d, dist, o) }, rest)
-            }
-            Level::Avx2 => {
-                let (full, rest) = points.split_at(points.len() / 4 * 4);
-                // SAFETY: the CPU has AVX2 and FMA (`Level::Avx2`).
-                (unsafe { avx2::inlier_moments(full, n, d, dist, o) }, rest)
-            }
-            Level::Baseline => (Moments::default(), points),
+        use super::simd::Level;
+        let (level, full, rest) = split_for_vectors(points);
+        // SAFETY: each pass runs only at a level the CPU has (`simd::level()`).
+        let fast = match level {
+            Level::Avx512 => unsafe { avx512::inlier_moments(full, n, d, dist, o) },
+            Level::Avx2 => unsafe { avx2::inlier_moments(full, n, d, dist, o) },
+            Level::Baseline => Moments::default(),
         };
         fast.plus(inlier_moments_scalar(rest, n, d, dist, o))
     }
@@ -232,19 +226,13 @@ fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 
 fn support(points: &[[f32; 3]], n: [f64; 3], offset: f64, dist: f64) -> (usize, f64) {
     #[cfg(target_arch = "x86_64")]
     {
-        use super::simd::{Level, level};
-        let ((count, squares), rest) = match level() {
-            Level::Avx512 => {
-                let (full, rest) = points.split_at(points.len() / 8 * 8);
-                // SAFETY: the CPU has AVX-512 F and VL (`Level::Avx512`).
-                (unsafe { avx512::support(full, n, offset, dist) }, rest)
-            }
-            Level::Avx2 => {
-                let (full, rest) = points.split_at(points.len() / 4 * 4);
-                // SAFETY: the CPU has AVX2 (`Level::Avx2`).
-                (unsafe { avx2::support(full, n, offset, dist) }, rest)
-            }
-            Level::Baseline => ((0, 0.0), points),
+        use super::simd::Level;
+        let (level, full, rest) = split_for_vectors(points);
+        // SAFETY: each pass runs only at a level the CPU has (`simd::level()`).
+        let (count, squares) = match level {
+            Level::Avx512 => unsafe { avx512::support(full, n, offset, dist) },
+            Level::Avx2 => unsafe { avx2::support(full, n, offset, dist) },
+            Level::Baseline => (0, 0.0),
         };
         let (more, more_squares) = support_scalar(rest, n, offset, dist);
         (count + more, squares + more_squares)
@@ -253,7 +241,23 @@ fn support(points: &[[f32; 3]], n: [f64; 3], offset: f64, dist: f64) -> (usize, 
     support_scalar(points, n, offset, dist)
 }
 
-/// `inlier_moments`, one point after another: the oracle of the AVX2 pass.
+/// The level the refit's passes run at, and `points` split into what its vector pass
+/// takes (whole steps of eight points in AVX-512, four in AVX2, none at the baseline) and
+/// the rest, for the scalar loop.
+#[cfg(target_arch = "x86_64")]
+fn split_for_vectors(points: &[[f32; 3]]) -> (super::simd::Level, &[[f32; 3]], &[[f32; 3]]) {
+    use super::simd::{Level, level};
+    let level = level();
+    let step = match level {
+        Level::Avx512 => 8,
+        Level::Avx2 => 4,
+        Level::Baseline => return (level, &[], points),
+    };
+    let (full, rest) = points.split_at(points.len() / step * step);
+    (level, full, rest)
+}
+
+/// `inlier_moments`, one point after another: the oracle of the AVX2 and AVX-512 passes.
 fn inlier_moments_scalar(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 3]) -> Moments {
     let mut m = Moments::default();
     for p in points.iter().filter(|p| near_plane(p, n, d, dist)) {
@@ -273,7 +277,7 @@ fn inlier_moments_scalar(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o:
     m
 }
 
-/// `support`, one point after another: the oracle of the AVX2 pass.
+/// `support`, one point after another: the oracle of the AVX2 and AVX-512 passes.
 fn support_scalar(points: &[[f32; 3]], n: [f64; 3], offset: f64, dist: f64) -> (usize, f64) {
     let (mut count, mut squares) = (0, 0.0);
     for p in points {
@@ -295,7 +299,7 @@ mod avx2 {
     use std::arch::x86_64::*;
 
     use super::Moments;
-    use crate::extract::cpu::lane_sum;
+    use crate::extract::cpu::simd::lane_sum;
 
     /// The x, y and z of the four points at `p` (12 floats).
     ///
