@@ -28,7 +28,8 @@ impl Run {
 
 /// The runs of an ascending list of pixel indices in an image `w` wide, in order. A
 /// division per row, none per pixel: per pixel, it was most of the time of the loops
-/// that walk a region's pixels by row and column.
+/// that walk a region's pixels by row and column. A run's end is found by galloping
+/// and bisection, a few reads however long the run.
 pub fn runs(pixels: &[u32], w: usize) -> impl Iterator<Item = Run> + '_ {
     debug_assert!(pixels.windows(2).all(|p| p[0] < p[1]), "ascending pixels");
     let (mut k, mut v, mut row_start) = (0, usize::MAX, 0);
@@ -37,15 +38,42 @@ pub fn runs(pixels: &[u32], w: usize) -> impl Iterator<Item = Run> + '_ {
         if v == usize::MAX || first >= row_start + w {
             (v, row_start) = (first / w, first / w * w);
         }
-        let mut end = k + 1;
-        while end < pixels.len() && pixels[end] as usize == first + (end - k) && (pixels[end] as usize) < row_start + w
-        {
-            end += 1;
-        }
-        let last = first + (end - k) - 1;
-        k = end;
-        Some(Run { v, row_start, first, last })
+        // pixels[k + j] is the run's j-th pixel up to the first gap or the row's end, and
+        // never after (the pixels ascend strictly: once one is past first + j, every later
+        // one is).
+        let len =
+            leading(|j| pixels.get(k + j).is_some_and(|&p| p as usize == first + j && (p as usize) < row_start + w));
+        k += len;
+        Some(Run { v, row_start, first, last: first + len - 1 })
     })
+}
+
+/// How many of j = 0, 1, 2, ... `holds`, given that it holds for 0 and, once it fails,
+/// fails for every j after: by galloping then bisection, a few calls however many hold.
+pub fn leading(holds: impl Fn(usize) -> bool) -> usize {
+    let (mut yes, mut no) = (0, 1);
+    while holds(no) {
+        (yes, no) = (no, no * 2);
+    }
+    while no - yes > 1 {
+        let mid = yes + (no - yes) / 2;
+        if holds(mid) { yes = mid } else { no = mid }
+    }
+    no
+}
+
+/// The index of the first of `values` other than `value`, if one is: sixteen at a time,
+/// each block tested by one OR of XORs, which vectorises (a search value by value does
+/// not). Label runs are tens to hundreds of pixels long.
+pub fn first_other(values: &[u32], value: u32) -> Option<usize> {
+    let mut blocks = values.chunks_exact(16);
+    for (k, block) in (&mut blocks).enumerate() {
+        if block.iter().fold(0, |any, &x| any | (x ^ value)) != 0 {
+            return block.iter().position(|&x| x != value).map(|j| 16 * k + j);
+        }
+    }
+    let start = values.len() - blocks.remainder().len();
+    blocks.remainder().iter().position(|&x| x != value).map(|j| start + j)
 }
 
 /// Calls `f` with the index of every non-zero byte of `mask`, ascending; eight bytes at a
@@ -181,15 +209,36 @@ mod tests {
     use super::*;
 
     #[test]
+    fn first_other_is_the_first_value_that_differs() {
+        // Every length to three blocks and a remainder, the first other value at every place.
+        for len in 0..52 {
+            assert_eq!(first_other(&vec![7; len], 7), None);
+            for at in 0..len {
+                let mut values = vec![7; len];
+                values[at] = 0;
+                values[len - 1] = 1;
+                assert_eq!(first_other(&values, 7), Some(at), "len {len}, other at {at}");
+            }
+        }
+    }
+
+    #[test]
     fn runs_are_the_stretches_of_consecutive_pixels_within_each_row() {
-        // Every 7th hash-picked pixel of a 13-wide image: runs that end at a row's end and
-        // go on at the next row's start must split there.
-        let (w, h) = (13usize, 11usize);
-        let pixels: Vec<u32> =
-            (0..(w * h) as u32).filter(|&i| !crate::extract::cpu::ransac::hash(i).is_multiple_of(7)).collect();
-        let got: Vec<Run> = runs(&pixels, w).collect();
+        // Every 7th hash-picked pixel of a 13-wide image left out: runs that end at a row's
+        // end and go on at the next row's start must split there. Then runs of every length
+        // up to whole rows of 300 (one pixel in 97 left out) and whole images.
+        for (w, h, gap) in [(13usize, 11usize, 7), (300, 9, 97), (300, 4, u32::MAX)] {
+            let pixels: Vec<u32> =
+                (0..(w * h) as u32).filter(|&i| !crate::extract::cpu::ransac::hash(i).is_multiple_of(gap)).collect();
+            check_runs(&pixels, w);
+        }
+        assert_eq!(runs(&[], 13).count(), 0);
+    }
+
+    fn check_runs(pixels: &[u32], w: usize) {
+        let got: Vec<Run> = runs(pixels, w).collect();
         let mut want: Vec<Run> = Vec::new();
-        for &i in &pixels {
+        for &i in pixels {
             let (i, v) = (i as usize, i as usize / w);
             match want.last_mut() {
                 Some(r) if r.v == v && r.last + 1 == i => r.last = i,
@@ -201,6 +250,5 @@ mod tests {
             got.windows(2).any(|p| p[0].last + 1 == p[1].first && p[0].columns().1 == w - 1),
             "the pixels hold a stretch across a row's end, split there"
         );
-        assert_eq!(runs(&[], w).count(), 0);
     }
 }

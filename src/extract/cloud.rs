@@ -2,6 +2,8 @@
 //! (fits, leak splits, joins, growth, polygons) each read points of many pixels, and a
 //! lookup is cheaper than back-projecting a pixel index (a division) every time.
 
+use std::ops::Range;
+
 use rayon::prelude::*;
 
 use super::Grid;
@@ -35,6 +37,18 @@ impl Cloud {
     pub fn point(&self, i: usize) -> Option<[f32; 3]> {
         let p = self.points[i];
         (p[2] != 0.0).then_some(p)
+    }
+
+    /// Appends the points of the valid pixels among `pixels` (consecutive indices), in
+    /// order: a run with no dropout, the usual case, is copied whole.
+    #[inline]
+    pub fn extend_valid(&self, pixels: Range<usize>, out: &mut Vec<[f32; 3]>) {
+        let points = &self.points[pixels];
+        if points.iter().fold(true, |all, p| all & (p[2] != 0.0)) {
+            out.extend_from_slice(points);
+        } else {
+            out.extend(points.iter().filter(|p| p[2] != 0.0));
+        }
     }
 
     /// Pixel i's depth, m (0 = invalid).

@@ -8,6 +8,8 @@
 //! the label image itself, visiting only a region's pixels and its border: no mask per
 //! region, no scan of its bounding box. Douglas-Peucker (imageproc) simplifies.
 
+use std::ops::Range;
+
 use imageproc::geometry::approximate_polygon_dp;
 use imageproc::point::Point;
 use rayon::prelude::*;
@@ -45,7 +47,7 @@ pub fn trace(seg: &Segmentation, simplify_px: f64, wanted: &[bool]) -> Vec<Regio
             }
             let shape = Shape { labels: &seg.labels.data, width: w, height: h, label };
             let borders = MARKS.with_borrow_mut(|marks| {
-                marks.resize(w * h, 0);
+                marks.cover(w * h);
                 follow_borders(&shape, pixels, marks)
             });
             let Some(oi) = borders.iter().position(|b| b.kind == BorderKind::Outer) else { return region };
@@ -64,8 +66,76 @@ pub fn trace(seg: &Segmentation, simplify_px: f64, wanted: &[bool]) -> Vec<Regio
 }
 
 thread_local! {
-    /// `follow_borders`' marks, one per pixel, all 0 between calls: made once per thread.
-    static MARKS: std::cell::RefCell<Vec<i32>> = const { std::cell::RefCell::new(Vec::new()) };
+    /// `follow_borders`' marks, all 0 between calls: made once per thread.
+    static MARKS: std::cell::RefCell<Marks> = const { std::cell::RefCell::new(Marks::new()) };
+}
+
+/// Border following's mark of each pixel (0: none yet), and a bit a pixel saying which are
+/// marked: the last mark inside a run is then found 64 pixels a word. Read from the marks
+/// themselves, that search touched every pixel of every region, and was most of the
+/// border following's time.
+#[derive(Default)]
+pub struct Marks {
+    values: Vec<i32>,
+    marked: Vec<u64>,
+}
+
+impl Marks {
+    pub const fn new() -> Marks {
+        Marks { values: Vec::new(), marked: Vec::new() }
+    }
+
+    /// Room for `pixels` pixels (never less than before), new ones unmarked.
+    pub fn cover(&mut self, pixels: usize) {
+        if pixels > self.values.len() {
+            self.values.resize(pixels, 0);
+            self.marked.resize(pixels.div_ceil(64), 0);
+        }
+    }
+
+    /// Whether no pixel is marked.
+    pub fn all_clear(&self) -> bool {
+        self.values.iter().all(|&m| m == 0) && self.marked.iter().all(|&b| b == 0)
+    }
+
+    #[inline]
+    fn get(&self, i: usize) -> i32 {
+        self.values[i]
+    }
+
+    /// Marks pixel i with m (not 0).
+    #[inline]
+    fn put(&mut self, i: usize, m: i32) {
+        self.values[i] = m;
+        self.marked[i / 64] |= 1 << (i % 64);
+    }
+
+    #[inline]
+    fn clear(&mut self, i: usize) {
+        self.values[i] = 0;
+        self.marked[i / 64] &= !(1 << (i % 64));
+    }
+
+    /// The mark of the last marked pixel of `pixels`, if one is.
+    fn last_in(&self, pixels: Range<usize>) -> Option<i32> {
+        if pixels.is_empty() {
+            return None;
+        }
+        let (first, last) = (pixels.start, pixels.end - 1);
+        for word in (first / 64..=last / 64).rev() {
+            let mut bits = self.marked[word];
+            if word == last / 64 {
+                bits &= u64::MAX >> (63 - last % 64);
+            }
+            if word == first / 64 {
+                bits &= u64::MAX << (first % 64);
+            }
+            if bits != 0 {
+                return Some(self.values[word * 64 + 63 - bits.leading_zeros() as usize]);
+            }
+        }
+        None
+    }
 }
 
 /// The pixels labelled `label` in an image of labels.
@@ -110,8 +180,8 @@ const WEST: usize = 0;
 
 /// Every border of `shape`, whose pixel indices are `pixels` (ascending), as Suzuki &
 /// Abe's algorithm 1 finds them scanning the shape with a background margin around the
-/// image. `marks` (one per image pixel) must be all 0, and is again on return.
-pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut [i32]) -> Vec<Border> {
+/// image. `marks` (covering the image) must be all clear, and is again on return.
+pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut Marks) -> Vec<Border> {
     // marks: 0 = a pixel no border has passed; n >= 2 = passed by border n - 2 (its
     // number in the paper); -n = passed by it with its east neighbour, background, seen.
     let w = shape.width;
@@ -123,13 +193,14 @@ pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut [i32]) -> Vec<B
                      (x, y): (usize, usize),
                      west_in: bool,
                      east_in: bool,
-                     marks: &mut [i32],
+                     marks: &mut Marks,
                      parent_number: &mut usize| {
-        let start = if marks[i] == 0 && !west_in {
+        let mark = marks.get(i);
+        let start = if mark == 0 && !west_in {
             Some((WEST, BorderKind::Outer))
-        } else if marks[i] >= 0 && !east_in {
-            if marks[i] > 1 {
-                *parent_number = marks[i] as usize;
+        } else if mark >= 0 && !east_in {
+            if mark > 1 {
+                *parent_number = mark as usize;
             }
             Some((EAST, BorderKind::Hole))
         } else {
@@ -148,8 +219,9 @@ pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut [i32]) -> Vec<B
             let points = follow(shape, (x as i32, y as i32), from, number, marks);
             borders.push(Border { points, kind, parent: parent.flatten() });
         }
-        if marks[i] != 0 {
-            *parent_number = marks[i].unsigned_abs() as usize;
+        let mark = marks.get(i);
+        if mark != 0 {
+            *parent_number = mark.unsigned_abs() as usize;
         }
     };
     // Run by run along the rows: only a run's ends can start a border (inside it both
@@ -165,7 +237,7 @@ pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut [i32]) -> Vec<B
         let (u_first, u_last) = run.columns();
         visit(first, (u_first, run.v), false, last > first, marks, &mut parent_number);
         if last > first {
-            if let Some(&m) = marks[first + 1..last].iter().rev().find(|&&m| m != 0) {
+            if let Some(m) = marks.last_in(first + 1..last) {
                 parent_number = m.unsigned_abs() as usize;
             }
             visit(last, (u_last, run.v), true, false, marks, &mut parent_number);
@@ -173,7 +245,7 @@ pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut [i32]) -> Vec<B
     }
     for b in &borders {
         for p in &b.points {
-            marks[p.y as usize * w + p.x as usize] = 0;
+            marks.clear(p.y as usize * w + p.x as usize);
         }
     }
     borders
@@ -181,7 +253,7 @@ pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut [i32]) -> Vec<B
 
 /// Follows the border through `start`, whose neighbour towards `from` is background,
 /// marking its pixels with `number` (step 3 of the paper's algorithm 1).
-fn follow(shape: &Shape, start: (i32, i32), from: usize, number: i32, marks: &mut [i32]) -> Vec<Point<i32>> {
+fn follow(shape: &Shape, start: (i32, i32), from: usize, number: i32, marks: &mut Marks) -> Vec<Point<i32>> {
     let width = shape.width;
     let step = |(x, y): (i32, i32), d: usize| (x + DIRECTIONS[d].0, y + DIRECTIONS[d].1);
     let at = |(x, y): (i32, i32)| y as usize * width + x as usize;
@@ -190,7 +262,7 @@ fn follow(shape: &Shape, start: (i32, i32), from: usize, number: i32, marks: &mu
         let (x, y) = step(start, d);
         shape.has(x, y)
     }) else {
-        marks[at(start)] = -number;
+        marks.put(at(start), -number);
         return vec![Point::new(start.0, start.1)];
     };
     let second = step(start, first);
@@ -214,11 +286,11 @@ fn follow(shape: &Shape, start: (i32, i32), from: usize, number: i32, marks: &mu
             east_seen |= d == EAST;
         }
         let following = step(current, next);
-        let m = &mut marks[at(current)];
+        let i = at(current);
         if east_seen {
-            *m = -number;
-        } else if *m == 0 {
-            *m = number;
+            marks.put(i, -number);
+        } else if marks.get(i) == 0 {
+            marks.put(i, number);
         }
         if following == start && current == second {
             break;
@@ -297,6 +369,39 @@ mod tests {
     }
 
     #[test]
+    fn the_last_mark_in_a_stretch_is_the_last_non_zero_one() {
+        // Stretches of every length over three words, marks (of either sign) at every
+        // place, alone and after an earlier one, the stretch and the words unaligned.
+        let mut marks = Marks::new();
+        marks.cover(200);
+        for start in [0, 1, 63, 64, 70] {
+            for len in 0..130 {
+                let pixels = start..start + len;
+                assert_eq!(marks.last_in(pixels.clone()), None);
+                for at in pixels.clone() {
+                    let (early, m) = ((start + at) / 2, if at % 2 == 0 { 5 } else { -7 });
+                    marks.put(at, m);
+                    assert_eq!(marks.last_in(pixels.clone()), Some(m), "{pixels:?}, mark at {at}");
+                    marks.put(early, 9);
+                    let want = if early == at { 9 } else { m };
+                    assert_eq!(marks.last_in(pixels.clone()), Some(want), "{pixels:?}, marks at {early} and {at}");
+                    // Marks outside the stretch are not its.
+                    for out in [start.wrapping_sub(1), start + len] {
+                        if out < 200 {
+                            marks.put(out, 3);
+                            assert_eq!(marks.last_in(pixels.clone()), Some(want), "{pixels:?}, a mark at {out}");
+                            marks.clear(out);
+                        }
+                    }
+                    marks.clear(at);
+                    marks.clear(early);
+                    assert!(marks.all_clear());
+                }
+            }
+        }
+    }
+
+    #[test]
     fn borders_followed_on_the_shape_are_imageproc_s_on_a_mask() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         let mut counts = [0usize; 2];
@@ -308,10 +413,11 @@ mod tests {
             let shape: Vec<bool> = (0..w * h).map(|_| rng.random_bool(density)).collect();
             let labels: Vec<u32> = shape.iter().map(|&s| s as u32 * 3).collect();
             let pixels: Vec<u32> = (0..w * h).filter(|&i| shape[i]).map(|i| i as u32).collect();
-            let mut marks = vec![0i32; w * h];
+            let mut marks = Marks::new();
+            marks.cover(w * h);
             let ours = follow_borders(&Shape { labels: &labels, width: w, height: h, label: 3 }, &pixels, &mut marks);
             assert_eq!(ours, imageproc_borders(&shape, w, h), "case {case}: {w}x{h} at density {density}");
-            assert!(marks.iter().all(|&m| m == 0), "case {case}: marks left behind");
+            assert!(marks.all_clear(), "case {case}: marks left behind");
             for b in &ours {
                 counts[(b.kind == BorderKind::Hole) as usize] += 1;
             }

@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use super::Grid;
 use super::cloud::Cloud;
 use super::cpu::ransac::{PlaneFit, PointBatch, refit};
-use crate::grid::{component_runs, flood, for_each_set, runs};
+use crate::grid::{component_runs, first_other, flood, for_each_set, leading, runs};
 
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
 #[derive(Clone, Debug)]
@@ -95,7 +95,7 @@ impl Segmentation {
         let mut batch = PointBatch { points: Vec::with_capacity(total), ranges: Vec::with_capacity(regions.len()) };
         for &r in regions {
             let start = batch.points.len();
-            batch.points.extend(self.pixels[r].iter().filter_map(|&i| cloud.point(i as usize)));
+            self.extend_points(r, cloud, &mut batch.points);
             batch.ranges.push(start..batch.points.len());
         }
         batch
@@ -104,8 +104,15 @@ impl Segmentation {
     /// Camera-frame points (raw depth, valid pixels only) of region r.
     pub fn points_of(&self, r: usize, cloud: &Cloud) -> Vec<[f32; 3]> {
         let mut points = Vec::with_capacity(self.pixels[r].len());
-        points.extend(self.pixels[r].iter().filter_map(|&i| cloud.point(i as usize)));
+        self.extend_points(r, cloud, &mut points);
         points
+    }
+
+    /// Appends the points of region r's valid pixels, run by run.
+    fn extend_points(&self, r: usize, cloud: &Cloud, out: &mut Vec<[f32; 3]>) {
+        for run in runs(&self.pixels[r], self.labels.width) {
+            cloud.extend_valid(run.first..run.last + 1, out);
+        }
     }
 
     /// Splits every region whose fit has an inlier ratio under `min_ratio`: it keeps the
@@ -200,9 +207,11 @@ impl Segmentation {
             unlabelled_beside_labelled(&self.labels, v, &mut beside);
             for_each_set(&beside, |u| candidates.push(pack((u, v))));
         }
-        // The wave that last queued each pixel: a wave's mark needs no clearing for the next.
-        let mut queued = vec![0u32; w * h];
-        for wave in 1..=waves {
+        // A bit a pixel, set while it is queued for the next wave (a pixel beside two that
+        // joined is queued once): small enough to stay in cache, and cleared again through
+        // the queue itself.
+        let mut queued = vec![0u64; (w * h).div_ceil(64)];
+        for _ in 0..waves {
             let labels = &self.labels.data;
             let joins: Vec<(u32, u32)> = candidates
                 .par_iter()
@@ -252,11 +261,16 @@ impl Segmentation {
                     (v + 1 < h, i + w, c + (1 << 16)),
                 ];
                 for (inside, j, packed) in neighbours {
-                    if inside && self.labels.data[j] == 0 && queued[j] != wave {
-                        queued[j] = wave;
+                    let bit = 1 << (j % 64);
+                    if inside && self.labels.data[j] == 0 && queued[j / 64] & bit == 0 {
+                        queued[j / 64] |= bit;
                         candidates.push(packed);
                     }
                 }
+            }
+            for &c in &candidates {
+                let (u, v) = unpack(c);
+                queued[(v * w + u) / 64] = 0;
             }
         }
         self.pixels_from_labels();
@@ -331,9 +345,9 @@ fn push_pixels(labels: &[u32], pixels: &mut [Vec<u32>]) {
 fn label_runs(labels: &[u32]) -> impl Iterator<Item = (Range<usize>, u32)> + Clone + '_ {
     let mut i = 0;
     std::iter::from_fn(move || {
-        i += labels.get(i..)?.iter().position(|&x| x != 0)?;
+        i += first_other(labels.get(i..)?, 0)?;
         let l = labels[i];
-        let end = i + labels[i..].iter().position(|&x| x != l).unwrap_or(labels.len() - i);
+        let end = i + first_other(&labels[i..], l).unwrap_or(labels.len() - i);
         let range = i..end;
         i = end;
         Some((range, l))
@@ -576,46 +590,67 @@ const NEARBY_PER_WAVE: u32 = 4;
 const CELL_PX: usize = 16;
 
 /// For each CELL_PX square of the image, the accepted regions whose bounding box,
-/// widened by a margin, overlaps it: the planes a pixel there may belong to.
+/// widened by a margin, overlaps it: the planes a pixel there may belong to. One list of
+/// labels, cell after cell (a list per cell was hundreds of small allocations a frame).
 struct NearbyRegions {
     cells_w: usize,
-    lists: Vec<Vec<u32>>,
+    /// Cell c's labels are `labels[starts[c]..starts[c + 1]]`, ascending.
+    starts: Vec<u32>,
+    labels: Vec<u32>,
 }
 
 impl NearbyRegions {
     fn new(seg: &Segmentation, accepted: &[bool], margin: usize) -> NearbyRegions {
         let (w, h) = (seg.labels.width, seg.labels.height);
         let (cells_w, cells_h) = (w.div_ceil(CELL_PX), h.div_ceil(CELL_PX));
-        let mut lists = vec![Vec::new(); cells_w * cells_h];
-        for (r, pixels) in seg.pixels.iter().enumerate() {
-            if !accepted[r] || pixels.is_empty() {
-                continue;
-            }
-            let [u0, v0, u1, v1] = bounding_box(pixels, w);
-            let (u0, v0) = (u0.saturating_sub(margin) / CELL_PX, v0.saturating_sub(margin) / CELL_PX);
-            let (u1, v1) = ((u1 + margin).min(w - 1) / CELL_PX, (v1 + margin).min(h - 1) / CELL_PX);
-            for cv in v0..=v1 {
-                for cu in u0..=u1 {
-                    lists[cv * cells_w + cu].push(r as u32 + 1);
-                }
+        // Each accepted region's label and the cells its widened box covers.
+        let boxes: Vec<(u32, [usize; 4])> = (seg.pixels.iter().enumerate())
+            .filter(|&(r, pixels)| accepted[r] && !pixels.is_empty())
+            .map(|(r, pixels)| {
+                let [u0, v0, u1, v1] = bounding_box(pixels, w);
+                let (u0, v0) = (u0.saturating_sub(margin) / CELL_PX, v0.saturating_sub(margin) / CELL_PX);
+                let (u1, v1) = ((u1 + margin).min(w - 1) / CELL_PX, (v1 + margin).min(h - 1) / CELL_PX);
+                (r as u32 + 1, [u0, v0, u1, v1])
+            })
+            .collect();
+        let cells =
+            |[u0, v0, u1, v1]: [usize; 4]| (v0..=v1).flat_map(move |cv| (cv * cells_w + u0)..=(cv * cells_w + u1));
+        let mut starts = vec![0u32; cells_w * cells_h + 1];
+        for &(_, cell_box) in &boxes {
+            for c in cells(cell_box) {
+                starts[c + 1] += 1;
             }
         }
-        NearbyRegions { cells_w, lists }
+        for c in 1..starts.len() {
+            starts[c] += starts[c - 1];
+        }
+        let mut next = starts.clone();
+        let mut labels = vec![0u32; starts[starts.len() - 1] as usize];
+        for &(label, cell_box) in &boxes {
+            for c in cells(cell_box) {
+                labels[next[c] as usize] = label;
+                next[c] += 1;
+            }
+        }
+        NearbyRegions { cells_w, starts, labels }
     }
 
     /// Labels of the regions around pixel (u, v).
     fn around(&self, u: usize, v: usize) -> &[u32] {
-        &self.lists[(v / CELL_PX) * self.cells_w + u / CELL_PX]
+        let c = (v / CELL_PX) * self.cells_w + u / CELL_PX;
+        &self.labels[self.starts[c] as usize..self.starts[c + 1] as usize]
     }
 }
 
 /// [u_min, v_min, u_max, v_max] of a non-empty, ascending list of pixel indices in an
-/// image `w` wide, run by run.
+/// image `w` wide: only each row's first and last pixel, the last found by `leading`.
 pub fn bounding_box(pixels: &[u32], w: usize) -> [usize; 4] {
     let (mut u0, mut u1) = (usize::MAX, 0);
-    for run in runs(pixels, w) {
-        let (a, b) = run.columns();
-        (u0, u1) = (u0.min(a), u1.max(b));
+    let mut k = 0;
+    while let Some(&first) = pixels.get(k) {
+        let row_start = first as usize / w * w;
+        k += leading(|j| pixels.get(k + j).is_some_and(|&p| (p as usize) < row_start + w));
+        (u0, u1) = (u0.min(first as usize - row_start), u1.max(pixels[k - 1] as usize - row_start));
     }
     [u0, pixels[0] as usize / w, u1, pixels[pixels.len() - 1] as usize / w]
 }
@@ -636,6 +671,23 @@ impl PlaneFit {
 mod tests {
     use super::*;
     use crate::extract::cpu::ransac::hash;
+
+    #[test]
+    fn bounding_box_is_the_pixels_extent() {
+        // Pixels of every density, rows with one pixel, many runs or whole, on widths with
+        // rows long and short.
+        for (w, h) in [(1, 4), (5, 3), (37, 29), (300, 7)] {
+            for keep in [1, 2, 5, 40] {
+                let pixels: Vec<u32> = (0..(w * h) as u32).filter(|&i| hash(i).is_multiple_of(keep)).collect();
+                if pixels.is_empty() {
+                    continue;
+                }
+                let (us, vs) = (|| pixels.iter().map(|&i| i as usize % w), || pixels.iter().map(|&i| i as usize / w));
+                let want = [us().min().unwrap(), vs().min().unwrap(), us().max().unwrap(), vs().max().unwrap()];
+                assert_eq!(bounding_box(&pixels, w), want, "{w}x{h}, one pixel in {keep}");
+            }
+        }
+    }
 
     #[test]
     fn row_scans_are_the_pixel_by_pixel_ones() {
