@@ -228,6 +228,30 @@ fn solve_down_portable(
     e: &mut [f32],
     out: &mut [f32],
 ) {
+    // Lane counts known when compiled: a full band's and the last band's of the usual
+    // image sizes (240 and 480 rows leave 48 and 32). Their per-lane loops are then whole
+    // vectors kept in registers, not loops over arrays on the stack: the solve in 0.75x.
+    match lanes {
+        LANES => solve_lanes::<LANES>(src, stride, lanes, step, inv_kappa, e, out),
+        48 => solve_lanes::<48>(src, stride, lanes, step, inv_kappa, e, out),
+        32 => solve_lanes::<32>(src, stride, lanes, step, inv_kappa, e, out),
+        16 => solve_lanes::<16>(src, stride, lanes, step, inv_kappa, e, out),
+        _ => solve_lanes::<0>(src, stride, lanes, step, inv_kappa, e, out),
+    }
+}
+
+/// `solve_down` on FIXED lanes, or on `lanes` where FIXED is 0.
+#[inline(always)]
+fn solve_lanes<const FIXED: usize>(
+    src: &[f32],
+    stride: usize,
+    lanes: usize,
+    step: f32,
+    inv_kappa: f32,
+    e: &mut [f32],
+    out: &mut [f32],
+) {
+    let lanes = if FIXED > 0 { FIXED } else { lanes };
     // Lets the compiler drop the bounds checks of the per-lane arrays.
     assert!(lanes <= LANES && e.len() == out.len());
     let len = out.len() / lanes;
@@ -314,9 +338,15 @@ mod tests {
 
     #[test]
     fn fast_diffusion_is_the_line_oracle_bit_for_bit() {
-        // A noisy slanted plane with a step, holes and a hole touching the border; 97
-        // wide and 130 tall, so both passes have a partial band of lanes.
-        let (w, h) = (97, 130);
+        // A noisy slanted plane with a step, holes and a hole touching the border. The sizes
+        // leave both passes a partial band of lanes: 33 and 2 (counts not known when
+        // compiled), and each of 16, 32 and 48 (known).
+        for (w, h) in [(97, 130), (80, 176), (96, 112)] {
+            diffusion_matches_the_oracle(w, h);
+        }
+    }
+
+    fn diffusion_matches_the_oracle(w: usize, h: usize) {
         let mut data: Vec<f32> = (0..w * h)
             .map(|i| {
                 let (u, v) = ((i % w) as f32, (i / w) as f32);
@@ -344,7 +374,7 @@ mod tests {
             }
             let fast = diffuse(&depth, time, steps, kappa);
             for i in 0..w * h {
-                assert_eq!(fast.data[i].to_bits(), oracle[i].to_bits(), "{steps} steps, pixel {i}");
+                assert_eq!(fast.data[i].to_bits(), oracle[i].to_bits(), "{w}x{h}, {steps} steps, pixel {i}");
             }
             assert_ne!(oracle, depth.data, "the steps moved the depth");
         }
