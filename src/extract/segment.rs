@@ -188,92 +188,85 @@ impl Segmentation {
     /// once the region has reached it (a 4-neighbour). Nearest among the regions around,
     /// not just those already touching: at a tread's inner corner the riser's lowest
     /// centimetre lies within `dist` of the tread's plane, and the tread would take it
-    /// before the riser got there. Each wave reads the labels of the one before, so
-    /// the result does not depend on scan order.
+    /// before the riser got there. A pixel's plane does not depend on the labels, so a
+    /// region grows breadth first through the pixels whose plane is its own, and the result
+    /// does not depend on scan order: pixel p joins wave k when a 4-neighbour of its plane's
+    /// region was labelled before wave k, by wave k - 1.
     pub fn grow(&mut self, fits: &[Option<PlaneFit>], accepted: &[bool], cloud: &Cloud, dist: f32, waves: u32) {
+        if waves > 0 {
+            let nearby = NearbyRegions::new(self, accepted, (NEARBY_PER_WAVE * waves) as usize);
+            let plane_of = |i, u, v| nearest_plane(&nearby, fits, cloud, dist, i, u, v);
+            let joined = self.first_wave(&plane_of);
+            self.later_waves(joined, waves, &plane_of);
+        }
+        self.pixels_from_labels();
+    }
+
+    /// Growth's first wave: the unlabelled pixels that a 4-neighbour of their plane's region
+    /// touches, labelled; handed back packed (`pack`).
+    fn first_wave(&mut self, plane_of: &(impl Fn(usize, usize, usize) -> Option<u32> + Sync)) -> Vec<u32> {
         let (w, h) = (self.labels.width, self.labels.height);
-        let nearby = NearbyRegions::new(self, accepted, (NEARBY_PER_WAVE * waves) as usize);
-        // Pixels go by (u, v) packed as v << 16 | u (ordered as their indices; Intrinsics
-        // hold images to 8192 a side): an index per pixel would cost two divisions to find
-        // its neighbours and cell, most of the growth's time.
-        let pack = |(u, v): (usize, usize)| (v << 16 | u) as u32;
-        let unpack = |c: u32| ((c & 0xffff) as usize, (c >> 16) as usize);
-        // The first wave's candidates: unlabelled pixels beside a labelled one. A pixel that
-        // did not join in one wave can only join in the next through a neighbour that did:
-        // after the first, each wave looks at those pixels only.
         let mut candidates: Vec<u32> = Vec::new();
         let mut beside = vec![0u8; w];
         for v in 0..h {
             unlabelled_beside_labelled(&self.labels, v, &mut beside);
-            for_each_set(&beside, |u| candidates.push(pack((u, v))));
+            for_each_set(&beside, |u| candidates.push(pack(u, v)));
         }
-        // A bit a pixel, set while it is queued for the next wave (a pixel beside two that
-        // joined is queued once): small enough to stay in cache, and cleared again through
-        // the queue itself.
-        let mut queued = vec![0u64; (w * h).div_ceil(64)];
-        for _ in 0..waves {
-            let labels = &self.labels.data;
-            let joins: Vec<(u32, u32)> = candidates
-                .par_iter()
-                .with_min_len(256)
-                .filter_map(|&c| {
-                    let (u, v) = unpack(c);
-                    let i = v * w + u;
-                    // The labels of its 4-neighbours (0 off the image), read once.
-                    let touching = [
-                        if u > 0 { labels[i - 1] } else { 0 },
-                        if u + 1 < w { labels[i + 1] } else { 0 },
-                        if v > 0 { labels[i - w] } else { 0 },
-                        if v + 1 < h { labels[i + w] } else { 0 },
-                    ];
-                    if touching == [0; 4] {
-                        return None;
-                    }
-                    let p = cloud.point(i)?;
-                    let mut best: Option<(f64, u32)> = None;
-                    for &l in nearby.around(u, v) {
-                        let Some(fit) = &fits[l as usize - 1] else { continue };
-                        let e = fit.distance(&p);
-                        if e < dist as f64 && best.is_none_or(|(b, bl)| e < b || (e == b && l < bl)) {
-                            best = Some((e, l));
-                        }
-                    }
-                    let (_, l) = best?;
-                    touching.contains(&l).then_some((c, l))
-                })
-                .collect();
-            if joins.is_empty() {
-                break;
-            }
-            for &(c, l) in &joins {
-                let (u, v) = unpack(c);
-                self.labels.data[v * w + u] = l;
-            }
-            candidates.clear();
-            for &(c, _) in &joins {
+        let labels = &self.labels.data;
+        let joins: Vec<(u32, u32)> = candidates
+            .par_iter()
+            .with_min_len(256)
+            .filter_map(|&c| {
                 let (u, v) = unpack(c);
                 let i = v * w + u;
-                // The 4-neighbours left, right, up and down: index, and packed as v << 16 | u.
-                let neighbours = [
-                    (u > 0, i.wrapping_sub(1), c.wrapping_sub(1)),
-                    (u + 1 < w, i + 1, c + 1),
-                    (v > 0, i.wrapping_sub(w), c.wrapping_sub(1 << 16)),
-                    (v + 1 < h, i + w, c + (1 << 16)),
+                // The labels of its 4-neighbours (0 off the image), read once.
+                let touching = [
+                    if u > 0 { labels[i - 1] } else { 0 },
+                    if u + 1 < w { labels[i + 1] } else { 0 },
+                    if v > 0 { labels[i - w] } else { 0 },
+                    if v + 1 < h { labels[i + w] } else { 0 },
                 ];
-                for (inside, j, packed) in neighbours {
-                    let bit = 1 << (j % 64);
-                    if inside && self.labels.data[j] == 0 && queued[j / 64] & bit == 0 {
-                        queued[j / 64] |= bit;
-                        candidates.push(packed);
-                    }
+                let l = plane_of(i, u, v)?;
+                touching.contains(&l).then_some((c, l))
+            })
+            .collect();
+        for &(c, l) in &joins {
+            let (u, v) = unpack(c);
+            self.labels.data[v * w + u] = l;
+        }
+        joins.into_iter().map(|(c, _)| c).collect()
+    }
+
+    /// Growth's waves after the first, breadth first from the pixels that joined it: an
+    /// unlabelled 4-neighbour of a pixel that joined wave k joins wave k + 1 when its plane
+    /// is that pixel's region.
+    fn later_waves(&mut self, first: Vec<u32>, waves: u32, plane_of: &impl Fn(usize, usize, usize) -> Option<u32>) {
+        let (w, h) = (self.labels.width, self.labels.height);
+        // Pixels that joined, with their wave, in the order they joined: a queue.
+        let mut queue: Vec<(u32, u32)> = first.into_iter().map(|c| (c, 1)).collect();
+        let mut next = 0;
+        while let Some(&(c, wave)) = queue.get(next) {
+            next += 1;
+            if wave == waves {
+                continue;
+            }
+            let (u, v) = unpack(c);
+            let i = v * w + u;
+            let l = self.labels.data[i];
+            // The 4-neighbours left, right, up and down: inside, index, (u, v).
+            let neighbours = [
+                (u > 0, i.wrapping_sub(1), (u.wrapping_sub(1), v)),
+                (u + 1 < w, i + 1, (u + 1, v)),
+                (v > 0, i.wrapping_sub(w), (u, v.wrapping_sub(1))),
+                (v + 1 < h, i + w, (u, v + 1)),
+            ];
+            for (inside, j, (nu, nv)) in neighbours {
+                if inside && self.labels.data[j] == 0 && plane_of(j, nu, nv) == Some(l) {
+                    self.labels.data[j] = l;
+                    queue.push((pack(nu, nv), wave + 1));
                 }
             }
-            for &c in &candidates {
-                let (u, v) = unpack(c);
-                queued[(v * w + u) / 64] = 0;
-            }
         }
-        self.pixels_from_labels();
     }
 
     /// Rebuilds every region's pixel list from the labels: one scan, ascending by
@@ -586,6 +579,43 @@ const JOIN_ANGLE_COS: f64 = 0.985;
 /// across all of it.
 const NEARBY_PER_WAVE: u32 = 4;
 
+/// The label of the accepted region around pixel i = (u, v) whose plane is nearest to the
+/// pixel's point, within `dist` (the lowest label on a tie); None for none or an invalid pixel.
+fn nearest_plane(
+    nearby: &NearbyRegions,
+    fits: &[Option<PlaneFit>],
+    cloud: &Cloud,
+    dist: f32,
+    i: usize,
+    u: usize,
+    v: usize,
+) -> Option<u32> {
+    let p = cloud.point(i)?;
+    let mut best: Option<(f64, u32)> = None;
+    for &l in nearby.around(u, v) {
+        let Some(fit) = &fits[l as usize - 1] else { continue };
+        let e = fit.distance(&p);
+        if e < dist as f64 && best.is_none_or(|(b, bl)| e < b || (e == b && l < bl)) {
+            best = Some((e, l));
+        }
+    }
+    best.map(|(_, l)| l)
+}
+
+/// Pixel (u, v) packed as v << 16 | u, ordered as its index; Intrinsics hold images to
+/// 8192 a side. Growth's queues hold pixels so: an index would cost two divisions to find
+/// a pixel's neighbours and cell.
+#[inline]
+fn pack(u: usize, v: usize) -> u32 {
+    (v << 16 | u) as u32
+}
+
+/// Pixel (u, v) of a packed v << 16 | u.
+#[inline]
+fn unpack(c: u32) -> (usize, usize) {
+    ((c & 0xffff) as usize, (c >> 16) as usize)
+}
+
 /// Side of the square cells of `NearbyRegions`, pixels.
 const CELL_PX: usize = 16;
 
@@ -671,6 +701,106 @@ impl PlaneFit {
 mod tests {
     use super::*;
     use crate::extract::cpu::ransac::hash;
+
+    /// Growth as its definition says it, the oracle: each wave a sweep of the whole image
+    /// that labels an unlabelled pixel when a 4-neighbour had its plane's label after the
+    /// wave before.
+    fn grow_by_sweeps(seg: &Segmentation, fits: &[Option<PlaneFit>], cloud: &Cloud, dist: f32, waves: u32) -> Vec<u32> {
+        let (w, h) = (seg.labels.width, seg.labels.height);
+        let accepted = vec![true; fits.len()];
+        let nearby = NearbyRegions::new(seg, &accepted, (NEARBY_PER_WAVE * waves) as usize);
+        let mut labels = seg.labels.data.clone();
+        for _ in 0..waves {
+            let before = labels.clone();
+            for (i, label) in labels.iter_mut().enumerate() {
+                let (u, v) = (i % w, i / w);
+                let touching =
+                    [(u > 0, i.wrapping_sub(1)), (u + 1 < w, i + 1), (v > 0, i.wrapping_sub(w)), (v + 1 < h, i + w)];
+                if before[i] == 0
+                    && let Some(l) = nearest_plane(&nearby, fits, cloud, dist, i, u, v)
+                    && touching.iter().any(|&(inside, j)| inside && before[j] == l)
+                {
+                    *label = l;
+                }
+            }
+        }
+        labels
+    }
+
+    #[test]
+    fn growth_is_the_wave_by_wave_sweep() {
+        // Three planes (1/depth linear in the pixel), noisy, with dropouts; regions are the
+        // planes' pixels less a band along their borders and specks of no region. Growth
+        // from them, 0 to 6 waves deep, with inlier distances that take most of the band
+        // or little of it.
+        let (w, h) = (90usize, 70usize);
+        let intr = crate::types::Intrinsics {
+            width: w as u32,
+            height: h as u32,
+            fx: 60.0,
+            fy: 60.0,
+            cx: 45.0,
+            cy: 35.0,
+            depth_scale: 0.001,
+        };
+        let piece = |u: usize, v: usize| {
+            if v > 40 + u / 6 {
+                0
+            } else if u < 50 {
+                1
+            } else {
+                2
+            }
+        };
+        let inverse_depth = [[0.45, 0.0, 0.004], [0.9, -0.002, 0.0], [0.2, 0.003, 0.001]];
+        let depth = Grid {
+            width: w,
+            height: h,
+            data: (0..w * h)
+                .map(|i| {
+                    let (u, v) = (i % w, i / w);
+                    let [a, b, c] = inverse_depth[piece(u, v)];
+                    let noise = (hash(i as u32) % 1000) as f32 * 4e-6 - 2e-3;
+                    if hash(i as u32 ^ 0x55).is_multiple_of(53) {
+                        0.0
+                    } else {
+                        1.0 / (a + b * u as f32 + c * v as f32) + noise
+                    }
+                })
+                .collect(),
+        };
+        let cloud = Cloud::new(&depth, &intr);
+        // A pixel's region: its piece's, unless within 4 pixels of another piece or a speck.
+        let labels = Grid {
+            width: w,
+            height: h,
+            data: (0..w * h)
+                .map(|i| {
+                    let (u, v) = (i % w, i / w);
+                    let near_other = (u.saturating_sub(4)..(u + 5).min(w))
+                        .any(|x| (v.saturating_sub(4)..(v + 5).min(h)).any(|y| piece(x, y) != piece(u, v)));
+                    if near_other || hash(i as u32 ^ 0xaa).is_multiple_of(40) { 0 } else { piece(u, v) as u32 + 1 }
+                })
+                .collect(),
+        };
+        for dist in [0.003f32, 0.02] {
+            for waves in 0..=6 {
+                let mut seg = Segmentation::from_labels(labels.clone(), 3, 1);
+                assert_eq!(seg.pixels.len(), 3);
+                let fits = super::super::cpu::ransac::fit_planes(&seg.points(&[0, 1, 2], &cloud), 32, 0.004);
+                let want = grow_by_sweeps(&seg, &fits, &cloud, dist, waves);
+                seg.grow(&fits, &[true; 3], &cloud, dist, waves);
+                assert_eq!(seg.labels.data, want, "inlier distance {dist}, {waves} waves");
+                let grown = want.iter().zip(&labels.data).filter(|(a, b)| a != b).count();
+                let left = want.iter().zip(&depth.data).filter(|&(&l, &z)| l == 0 && z != 0.0).count();
+                // Some growth, and while the bands are not yet crossed, pixels left to grow into.
+                assert!(waves == 0 || grown > 100, "{dist}, {waves} waves: grew {grown}");
+                assert!(waves > 2 || left > 100, "{dist}, {waves} waves: left {left}");
+                let listed: usize = seg.pixels.iter().map(Vec::len).sum();
+                assert_eq!(listed, want.iter().filter(|&&l| l != 0).count(), "pixel lists follow the labels");
+            }
+        }
+    }
 
     #[test]
     fn bounding_box_is_the_pixels_extent() {
