@@ -11,55 +11,68 @@ use rayon::prelude::*;
 use super::components::hysteresis;
 use super::normals::NormalPlanes;
 use super::{ROWS_PER_TASK, widest_simd};
-use crate::grid::{Grid, for_each_set};
+use crate::grid::Grid;
 
-/// Gradient of the normal field: (magnitude, NMS sector 0..4) per pixel; sector 4 marks
-/// a pixel whose 3x3 neighbourhood lacks a normal, or on the image's border (magnitude 0
-/// there). The fast loop reads the normals as planes of x, y, z and validity
+/// The gradient of the normal field as shaders/gradient.wgsl writes it: a plane of
+/// magnitudes and one of NMS sectors (0..4; 4 marks a pixel whose 3x3 neighbourhood lacks
+/// a normal, or on the image's border, magnitude 0 there).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Gradient {
+    pub magnitude: Grid<f32>,
+    pub sector: Grid<u8>,
+}
+
+/// Gradient of the normal field (`Gradient`). The fast loop reads the normals as planes of x, y, z and validity
 /// (`NormalPlanes`, which the normals stage writes beside the interleaved normals), so
 /// that each row is one pass of plain slice arithmetic over the three rows around it, and
 /// vectorises. Sums in the order of `gradient_at` (and of shaders/gradient.wgsl): the
 /// results are the same bits.
-pub fn normal_gradient(normals: &Grid<[f32; 3]>) -> Grid<(f32, u8)> {
+pub fn normal_gradient(normals: &Grid<[f32; 3]>) -> Gradient {
     gradient_of_planes(&NormalPlanes::of(normals))
 }
 
 /// `normal_gradient` of normals already split into planes (as the normals stage hands them on).
-pub fn gradient_of_planes(planes: &NormalPlanes) -> Grid<(f32, u8)> {
+pub fn gradient_of_planes(planes: &NormalPlanes) -> Gradient {
     let (w, h) = (planes.width, planes.height);
-    let mut data = vec![(0.0f32, 4u8); w * h];
+    let (mut magnitude, mut sector) = (vec![0.0f32; w * h], vec![4u8; w * h]);
     if w >= 3 && h >= 3 {
         let planes = &planes.data;
-        data.par_chunks_mut(w).enumerate().with_min_len(ROWS_PER_TASK).for_each_init(
-            || (vec![0.0f32; 8 * w], vec![0u8; w]),
-            |(scratch, sectors), (v, out)| {
-                if v >= 1 && v + 1 < h {
-                    gradient_row(&planes[(v - 1) * 4 * w..(v + 2) * 4 * w], &mut out[1..w - 1], w, scratch, sectors);
-                }
-            },
-        );
+        (magnitude.par_chunks_mut(w).zip(sector.par_chunks_mut(w)).enumerate().with_min_len(ROWS_PER_TASK))
+            .for_each_init(
+                || vec![0.0f32; 7 * w],
+                |scratch, (v, (m, s))| {
+                    if v >= 1 && v + 1 < h {
+                        let rows = &planes[(v - 1) * 4 * w..(v + 2) * 4 * w];
+                        gradient_row(rows, &mut m[1..w - 1], &mut s[1..w - 1], w, scratch);
+                    }
+                },
+            );
     }
-    Grid { width: w, height: h, data }
+    Gradient {
+        magnitude: Grid { width: w, height: h, data: magnitude },
+        sector: Grid { width: w, height: h, data: sector },
+    }
 }
 
 widest_simd! {
     /// One row of `normal_gradient`: `planes` holds the planes of the rows above, at and
-    /// below it; `out` is the row's interior (columns 1 ..= w - 2); scratch of 8w floats and w bytes.
-    fn gradient_row(planes: &[f32], out: &mut [(f32, u8)], w: usize, scratch: &mut [f32], sectors: &mut [u8]) = gradient_row_portable
+    /// below it; `magnitudes` and `sectors` are the row's interior (columns 1 ..= w - 2);
+    /// scratch of 7w floats.
+    fn gradient_row(planes: &[f32], magnitudes: &mut [f32], sectors: &mut [u8], w: usize, scratch: &mut [f32]) = gradient_row_portable
 }
 
 /// Loops over equal-length slices only, so that they carry no bounds checks and vectorise.
 #[inline(always)]
-fn gradient_row_portable(planes: &[f32], out: &mut [(f32, u8)], w: usize, scratch: &mut [f32], sectors: &mut [u8]) {
-    let n = out.len();
+fn gradient_row_portable(planes: &[f32], magnitudes: &mut [f32], sectors: &mut [u8], w: usize, scratch: &mut [f32]) {
+    let n = magnitudes.len();
     // Taps left, centre and right of plane c of row j (0 above, 1 at, 2 below).
     let taps = |j: usize, c: usize| {
         let p = &planes[(4 * j + c) * w..][..n + 2];
         (&p[..n], &p[1..n + 1], &p[2..n + 2])
     };
-    let (sums, rest) = scratch.split_at_mut(6 * n);
-    let (ok, magnitudes) = rest.split_at_mut(n);
-    let (magnitudes, sectors) = (&mut magnitudes[..n], &mut sectors[..n]);
+    let (sums, ok) = scratch.split_at_mut(6 * n);
+    let ok = &mut ok[..n];
+    let sectors = &mut sectors[..n];
     for (c, g) in sums.chunks_exact_mut(2 * n).enumerate() {
         let (gx, gy) = g.split_at_mut(n);
         let ((l0, m0, r0), (l1, _, r1), (l2, m2, r2)) = (taps(0, c), taps(1, c), taps(2, c));
@@ -79,15 +92,11 @@ fn gradient_row_portable(planes: &[f32], out: &mut [(f32, u8)], w: usize, scratc
     let (g0, rest) = sums.split_at(2 * n);
     let (g1, g2) = rest.split_at(2 * n);
     let ((gx0, gy0), (gx1, gy1), (gx2, gy2)) = (g0.split_at(n), g1.split_at(n), g2.split_at(n));
-    // Into plain arrays first: a loop storing (f32, u8) pairs does not vectorise.
     for i in 0..n {
         let (m, sector) = gradient_sector([gx0[i], gx1[i], gx2[i]], [gy0[i], gy1[i], gy2[i]]);
         let valid = ok[i] == 1.0;
         magnitudes[i] = if valid { m } else { 0.0 };
         sectors[i] = if valid { sector } else { 4 };
-    }
-    for ((o, &m), &sector) in out.iter_mut().zip(magnitudes.iter()).zip(sectors.iter()) {
-        *o = (m, sector);
     }
 }
 
@@ -143,52 +152,83 @@ pub const SECTOR_STEP: [(isize, isize); 4] = [(1, 0), (1, 1), (0, 1), (-1, 1)];
 
 /// Canny edges: 1 where the magnitude is a local maximum across the edge and joins a
 /// pixel at or above `high` through pixels at or above `low` (8-connected).
-pub fn canny(grad: &Grid<(f32, u8)>, low: f32, high: f32) -> Grid<u8> {
+pub fn canny(grad: &Gradient, low: f32, high: f32) -> Grid<u8> {
     hysteresis(&classify(grad, low, high))
 }
 
 /// Non-maximum suppression and the double threshold: 0 none, 1 weak, 2 strong per pixel.
-pub fn classify(grad: &Grid<(f32, u8)>, low: f32, high: f32) -> Grid<u8> {
-    let w = grad.width;
-    let mut class = vec![0u8; w * grad.height];
-    class.par_chunks_mut(w).enumerate().for_each_init(
-        || vec![0u8; w],
-        |edgy, (v, out)| {
-            // Most of a frame is flat: a pixel with a magnitude under `low` stays 0, as
-            // `suppressed_class` would leave it; the others are found a whole row at a time.
-            at_least(&grad.data[v * w..(v + 1) * w], low, edgy);
-            for_each_set(edgy, |u| out[u] = suppressed_class(grad, u, v, low, high));
-        },
-    );
-    Grid { width: w, height: grad.height, data: class }
+pub fn classify(grad: &Gradient, low: f32, high: f32) -> Grid<u8> {
+    let (w, h) = (grad.magnitude.width, grad.magnitude.height);
+    let mut class = vec![0u8; w * h];
+    class.par_chunks_mut(w.max(1)).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, out)| {
+        if w >= 3 && v >= 1 && v + 1 < h {
+            let m = &grad.magnitude.data[(v - 1) * w..(v + 2) * w];
+            suppress_row(m, &grad.sector.data[v * w..(v + 1) * w], low, high, out);
+        }
+        // The image's border, whose neighbours lie off it (0 to the oracle): by the oracle.
+        // The gradient leaves sector 4 there, so these are 0.
+        let border = if v == 0 || v + 1 == h { 0..w } else { 0..0 };
+        for u in border.chain([0, w.saturating_sub(1)]) {
+            out[u] = suppressed_class(grad, u, v, low, high);
+        }
+    });
+    Grid { width: w, height: h, data: class }
 }
 
 widest_simd! {
-    /// 1 in `out` where the magnitude is `low` or more.
-    fn at_least(row: &[(f32, u8)], low: f32, out: &mut [u8]) = at_least_portable
+    /// One row of `classify`'s interior (columns 1 ..= w - 2): `magnitudes` holds the rows
+    /// above, at and below it (w each), `sectors` its sectors, `out` the whole row.
+    fn suppress_row(magnitudes: &[f32], sectors: &[u8], low: f32, high: f32, out: &mut [u8]) = suppress_row_portable
 }
 
+/// `suppressed_class` for a row's inside, over equal-length slices (the rows shifted by a
+/// pixel each way) so that the loop vectorises; each pixel's two neighbours across its
+/// edge are picked from the four candidates by value. The frame's flat parts, under
+/// `low`, are most of it; a search for the pixels over `low` and the oracle on those alone
+/// cost three times this.
 #[inline(always)]
-fn at_least_portable(row: &[(f32, u8)], low: f32, out: &mut [u8]) {
-    for (o, &(m, _)) in out.iter_mut().zip(row) {
-        *o = u8::from(m >= low);
+fn suppress_row_portable(magnitudes: &[f32], sectors: &[u8], low: f32, high: f32, out: &mut [u8]) {
+    let w = sectors.len();
+    let n = w - 2;
+    // Columns 0.., 1.. and 2.. of a row: left of, at and right of the pixels 1 ..= w - 2.
+    let shifts = |j: usize| {
+        let r = &magnitudes[j * w..(j + 1) * w];
+        (&r[..n], &r[1..n + 1], &r[2..n + 2])
+    };
+    let ((up_left, up, up_right), (left, centre, right), (down_left, down, down_right)) =
+        (shifts(0), shifts(1), shifts(2));
+    let (sectors, out) = (&sectors[1..n + 1], &mut out[1..n + 1]);
+    for i in 0..n {
+        let (m, s) = (centre[i], sectors[i]);
+        // SECTOR_STEP's neighbours at -1 and +1, picked by masks of their bits (picked by
+        // value, the compiler made them gathers).
+        let mask = |k: u8| 0u32.wrapping_sub(u32::from(s == k));
+        let pick = |c: [f32; 4]| {
+            let bits = (c[0].to_bits() & mask(0)) | (c[1].to_bits() & mask(1));
+            f32::from_bits(bits | (c[2].to_bits() & mask(2)) | (c[3].to_bits() & mask(3)))
+        };
+        let before = pick([left[i], up_left[i], up[i], up_right[i]]);
+        let after = pick([right[i], down_right[i], down[i], down_left[i]]);
+        let kept = (s < 4) & (m >= low) & (m > before) & (m >= after);
+        out[i] = u8::from(kept) * (1 + u8::from(m >= high));
     }
 }
 
 /// classify.wgsl at pixel (u, v), the oracle: 0, 1 (weak) or 2 (strong) after non-maximum suppression.
 #[inline]
-pub fn suppressed_class(grad: &Grid<(f32, u8)>, u: usize, v: usize, low: f32, high: f32) -> u8 {
-    let (m, sector) = grad.data[v * grad.width + u];
+pub fn suppressed_class(grad: &Gradient, u: usize, v: usize, low: f32, high: f32) -> u8 {
+    let (w, h) = (grad.magnitude.width, grad.magnitude.height);
+    let (m, sector) = (grad.magnitude.data[v * w + u], grad.sector.data[v * w + u]);
     if sector == 4 || m < low {
         return 0;
     }
     let (du, dv) = SECTOR_STEP[sector as usize];
     let at = |s: isize| {
         let (nu, nv) = (u as isize + s * du, v as isize + s * dv);
-        if nu < 0 || nv < 0 || nu >= grad.width as isize || nv >= grad.height as isize {
+        if nu < 0 || nv < 0 || nu >= w as isize || nv >= h as isize {
             0.0
         } else {
-            grad.data[nv as usize * grad.width + nu as usize].0
+            grad.magnitude.data[nv as usize * w + nu as usize]
         }
     };
     if m > at(-1) && m >= at(1) { if m >= high { 2 } else { 1 } } else { 0 }
@@ -202,7 +242,7 @@ mod tests {
     #[test]
     fn fast_classes_are_the_oracle_s() {
         let grad = normal_gradient(&stair_normals());
-        let (w, h) = (grad.width, grad.height);
+        let (w, h) = (grad.magnitude.width, grad.magnitude.height);
         let fast = classify(&grad, 0.05, 0.1);
         for v in 0..h {
             for u in 0..w {
@@ -220,13 +260,13 @@ mod tests {
         let mut edges = 0;
         for v in 0..n.height {
             for u in 0..n.width {
-                let (m, s) = fast.data[v * n.width + u];
+                let (m, s) = (fast.magnitude.data[v * n.width + u], fast.sector.data[v * n.width + u]);
                 let (want_m, want_s) = gradient_at(&n, u, v);
                 assert_eq!((m.to_bits(), s), (want_m.to_bits(), want_s), "pixel ({u}, {v})");
                 edges += usize::from(s != 4 && m > 0.05);
             }
         }
-        let holes = fast.data.iter().filter(|g| g.1 == 4).count();
+        let holes = fast.sector.data.iter().filter(|&&s| s == 4).count();
         assert!(edges > 500 && holes > 1000, "the frame has edges ({edges}) and holes ({holes}) to compare");
     }
 }
