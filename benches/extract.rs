@@ -26,15 +26,15 @@ fn bench(c: &mut Criterion) {
         c.bench_function(&format!("cpu diffusion {size}"), |b| b.iter(|| diffusion::diffuse(&depth, 12.0, 4, kappa)));
         let smoothed = diffusion::diffuse(&depth, 12.0, 4, kappa);
         c.bench_function(&format!("cpu normals {size}"), |b| b.iter(|| normals::normals(&smoothed, &intr, 5)));
-        let n = normals::normals(&smoothed, &intr, 5);
+        let (_, planes) = normals::normals_and_planes(&smoothed, &intr, 5);
         c.bench_function(&format!("cpu edges {size}"), |b| {
             b.iter(|| {
-                let e = canny::canny(&canny::normal_gradient(&n), 0.05, 0.1);
-                boundary::boundary(&e, &smoothed, 0.03, &n, cfg.closing_kernel_px, 5)
+                let e = canny::canny(&canny::gradient_of_planes(&planes), 0.05, 0.1);
+                boundary::boundary(&e, &smoothed, 0.03, &planes, cfg.closing_kernel_px, 5)
             })
         });
-        let e = canny::canny(&canny::normal_gradient(&n), 0.05, 0.1);
-        let boundary = boundary::boundary(&e, &smoothed, 0.03, &n, cfg.closing_kernel_px, 5);
+        let e = canny::canny(&canny::gradient_of_planes(&planes), 0.05, 0.1);
+        let boundary = boundary::boundary(&e, &smoothed, 0.03, &planes, cfg.closing_kernel_px, 5);
         c.bench_function(&format!("cpu regions {size}"), |b| b.iter(|| Segmentation::components(&boundary, 30)));
         let seg = Segmentation::components(&boundary, 30);
         let all: Vec<usize> = (0..seg.pixels.len()).collect();

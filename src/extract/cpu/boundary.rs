@@ -7,6 +7,7 @@ use rayon::prelude::*;
 
 use super::ROWS_PER_TASK;
 use super::morphology::{close, closing_passes, morphology_at};
+use super::normals::NormalPlanes;
 use crate::extract::gpu::BoundaryParams;
 use crate::grid::Grid;
 
@@ -22,7 +23,7 @@ pub fn boundary(
     canny: &Grid<u8>,
     depth: &Grid<f32>,
     ratio: f32,
-    normals: &Grid<[f32; 3]>,
+    normals: &NormalPlanes,
     closing: u32,
     seal: u32,
 ) -> Grid<u8> {
@@ -35,16 +36,15 @@ pub fn boundary(
         out.iter_mut().zip(&canny.data[v * w..(v + 1) * w]).for_each(|(o, &c)| *o |= u8::from(c != 0));
     });
     let closed = close(&Grid { width: w, height: h, data: lines }, closing);
-    let with_holes = Grid {
-        width: w,
-        height: h,
-        data: closed
-            .data
-            .iter()
-            .zip(&normals.data)
-            .map(|(&l, n)| u8::from((l != 0) | ((n[0] == 0.0) & (n[1] == 0.0) & (n[2] == 0.0))))
-            .collect(),
-    };
+    // The normals' validity plane, a row at a time: 0 where the pixel has no normal.
+    let mut with_holes = vec![0u8; w * h];
+    with_holes.par_chunks_mut(w.max(1)).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, out)| {
+        let valid = &normals.data[(4 * v + 3) * w..(4 * v + 4) * w];
+        for ((o, &l), &ok) in out.iter_mut().zip(&closed.data[v * w..(v + 1) * w]).zip(valid) {
+            *o = u8::from((l != 0) | (ok == 0.0));
+        }
+    });
+    let with_holes = Grid { width: w, height: h, data: with_holes };
     let sealed = close(&with_holes, seal);
     // Regions are 8-connected (as contour tracing sees them), so a thin diagonal line
     // would leak: growing each line pixel into its 4-neighbours (a plus-shaped dilation,
@@ -190,7 +190,7 @@ mod tests {
                 .collect(),
         };
         let canny = canny(&normal_gradient(&n), 0.05, 0.1);
-        let fast = boundary(&canny, &depth, 0.03, &n, 7, 5);
+        let fast = boundary(&canny, &depth, 0.03, &NormalPlanes::of(&n), 7, 5);
         let want = boundary_oracle(&canny, &depth, 0.03, &n, 7, 5);
         assert_eq!(fast, want);
         let ones = want.data.iter().filter(|&&b| b != 0).count();

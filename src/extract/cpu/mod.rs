@@ -34,7 +34,7 @@ pub fn image_stages(
         &canny,
         &smoothed,
         cfg.depth_edge_ratio as f32,
-        &normals,
+        &planes,
         cfg.closing_kernel_px,
         cfg.normal_kernel,
     );
