@@ -753,36 +753,22 @@ mod tests {
             }
         };
         let inverse_depth = [[0.45, 0.0, 0.004], [0.9, -0.002, 0.0], [0.2, 0.003, 0.001]];
-        let depth = Grid {
-            width: w,
-            height: h,
-            data: (0..w * h)
-                .map(|i| {
-                    let (u, v) = (i % w, i / w);
-                    let [a, b, c] = inverse_depth[piece(u, v)];
-                    let noise = (hash(i as u32) % 1000) as f32 * 4e-6 - 2e-3;
-                    if hash(i as u32 ^ 0x55).is_multiple_of(53) {
-                        0.0
-                    } else {
-                        1.0 / (a + b * u as f32 + c * v as f32) + noise
-                    }
-                })
-                .collect(),
-        };
+        // An image of f(pixel index, u, v).
+        fn image<T>(w: usize, h: usize, f: impl Fn(usize, usize, usize) -> T) -> Grid<T> {
+            Grid { width: w, height: h, data: (0..w * h).map(|i| f(i, i % w, i / w)).collect() }
+        }
+        let depth = image(w, h, |i, u, v| {
+            let [a, b, c] = inverse_depth[piece(u, v)];
+            let noise = (hash(i as u32) % 1000) as f32 * 4e-6 - 2e-3;
+            if hash(i as u32 ^ 0x55).is_multiple_of(53) { 0.0 } else { 1.0 / (a + b * u as f32 + c * v as f32) + noise }
+        });
         let cloud = Cloud::new(&depth, &intr);
         // A pixel's region: its piece's, unless within 4 pixels of another piece or a speck.
-        let labels = Grid {
-            width: w,
-            height: h,
-            data: (0..w * h)
-                .map(|i| {
-                    let (u, v) = (i % w, i / w);
-                    let near_other = (u.saturating_sub(4)..(u + 5).min(w))
-                        .any(|x| (v.saturating_sub(4)..(v + 5).min(h)).any(|y| piece(x, y) != piece(u, v)));
-                    if near_other || hash(i as u32 ^ 0xaa).is_multiple_of(40) { 0 } else { piece(u, v) as u32 + 1 }
-                })
-                .collect(),
-        };
+        let labels = image(w, h, |i, u, v| {
+            let near_other = (u.saturating_sub(4)..(u + 5).min(w))
+                .any(|x| (v.saturating_sub(4)..(v + 5).min(h)).any(|y| piece(x, y) != piece(u, v)));
+            if near_other || hash(i as u32 ^ 0xaa).is_multiple_of(40) { 0 } else { piece(u, v) as u32 + 1 }
+        });
         for dist in [0.003f32, 0.02] {
             for waves in 0..=6 {
                 let mut seg = Segmentation::from_labels(labels.clone(), 3, 1);
