@@ -188,10 +188,10 @@ impl Segmentation {
     /// once the region has reached it (a 4-neighbour). Nearest among the regions around,
     /// not just those already touching: at a tread's inner corner the riser's lowest
     /// centimetre lies within `dist` of the tread's plane, and the tread would take it
-    /// before the riser got there. A pixel's plane does not depend on the labels, so a
-    /// region grows breadth first through the pixels whose plane is its own, and the result
-    /// does not depend on scan order: pixel p joins wave k when a 4-neighbour of its plane's
-    /// region was labelled before wave k, by wave k - 1.
+    /// before the riser got there. A pixel joins at wave k when, after wave k - 1, a
+    /// 4-neighbour carries its plane's label; the result does not depend on scan order. A
+    /// pixel's plane does not depend on the labels, so after the first wave a region grows
+    /// breadth first through the pixels whose plane is its own.
     pub fn grow(&mut self, fits: &[Option<PlaneFit>], accepted: &[bool], cloud: &Cloud, dist: f32, waves: u32) {
         if waves > 0 {
             let nearby = NearbyRegions::new(self, accepted, (NEARBY_PER_WAVE * waves) as usize);

@@ -22,9 +22,9 @@ pub struct Gradient {
     pub sector: Grid<u8>,
 }
 
-/// Gradient of the normal field (`Gradient`). The fast loop reads the normals as planes of x, y, z and validity
-/// (`NormalPlanes`, which the normals stage writes beside the interleaved normals), so
-/// that each row is one pass of plain slice arithmetic over the three rows around it, and
+/// Gradient of the normal field (`Gradient`). The fast loop reads the normals as planes
+/// of x, y, z and validity (`NormalPlanes`, which the normals stage writes beside the
+/// interleaved normals), so that each row is one pass of plain slice arithmetic over the three rows around it, and
 /// vectorises. Sums in the order of `gradient_at` (and of shaders/gradient.wgsl): the
 /// results are the same bits.
 pub fn normal_gradient(normals: &Grid<[f32; 3]>) -> Gradient {
@@ -182,10 +182,9 @@ widest_simd! {
 }
 
 /// `suppressed_class` for a row's inside, over equal-length slices (the rows shifted by a
-/// pixel each way) so that the loop vectorises; each pixel's two neighbours across its
-/// edge are picked from the four candidates by value. The frame's flat parts, under
-/// `low`, are most of it; a search for the pixels over `low` and the oracle on those alone
-/// cost three times this.
+/// pixel each way) so that the loop vectorises. A search for the pixels at or over `low`
+/// and the oracle on those alone took four to six times as long: on a noisy frame they
+/// are most of it.
 #[inline(always)]
 fn suppress_row_portable(magnitudes: &[f32], sectors: &[u8], low: f32, high: f32, out: &mut [u8]) {
     let w = sectors.len();
