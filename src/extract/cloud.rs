@@ -36,7 +36,7 @@ impl Cloud {
     #[inline]
     pub fn point(&self, i: usize) -> Option<[f32; 3]> {
         let p = self.points[i];
-        (p[2] != 0.0).then_some(p)
+        has_depth(&p).then_some(p)
     }
 
     /// Appends the points of the valid pixels among `pixels` (consecutive indices), in
@@ -44,10 +44,10 @@ impl Cloud {
     #[inline]
     pub fn extend_valid(&self, pixels: Range<usize>, out: &mut Vec<[f32; 3]>) {
         let points = &self.points[pixels];
-        if points.iter().fold(true, |all, p| all & (p[2] != 0.0)) {
+        if points.iter().fold(true, |all, p| all & has_depth(p)) {
             out.extend_from_slice(points);
         } else {
-            out.extend(points.iter().filter(|p| p[2] != 0.0));
+            out.extend(points.iter().filter(|p| has_depth(p)));
         }
     }
 
@@ -56,4 +56,10 @@ impl Cloud {
     pub fn depth(&self, i: usize) -> f32 {
         self.points[i][2]
     }
+}
+
+/// Whether a pixel's point is one: an invalid depth back-projects to z = 0.
+#[inline(always)]
+fn has_depth(p: &[f32; 3]) -> bool {
+    p[2] != 0.0
 }
