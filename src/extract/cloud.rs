@@ -51,6 +51,12 @@ impl Cloud {
         }
     }
 
+    /// The points of consecutive pixels, invalid ones included (z = 0: `has_depth`).
+    #[inline]
+    pub fn points(&self, pixels: Range<usize>) -> &[[f32; 3]] {
+        &self.points[pixels]
+    }
+
     /// Pixel i's depth, m (0 = invalid).
     #[inline]
     pub fn depth(&self, i: usize) -> f32 {
@@ -60,6 +66,6 @@ impl Cloud {
 
 /// Whether a pixel's point is one: an invalid depth back-projects to z = 0.
 #[inline(always)]
-fn has_depth(p: &[f32; 3]) -> bool {
+pub fn has_depth(p: &[f32; 3]) -> bool {
     p[2] != 0.0
 }

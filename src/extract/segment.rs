@@ -17,7 +17,7 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 
 use super::Grid;
-use super::cloud::Cloud;
+use super::cloud::{Cloud, has_depth};
 use super::cpu::ransac::{PlaneFit, PointBatch, refit};
 use crate::grid::{component_runs, first_other, flood, for_each_set, leading, runs};
 
@@ -190,83 +190,15 @@ impl Segmentation {
     /// centimetre lies within `dist` of the tread's plane, and the tread would take it
     /// before the riser got there. A pixel joins at wave k when, after wave k - 1, a
     /// 4-neighbour carries its plane's label; the result does not depend on scan order. A
-    /// pixel's plane does not depend on the labels, so after the first wave a region grows
-    /// breadth first through the pixels whose plane is its own.
+    /// pixel's plane does not depend on the labels: it is found once for every unlabelled
+    /// pixel (`plane_image`), and the waves are then sweeps of whole rows (`join_waves`).
     pub fn grow(&mut self, fits: &[Option<PlaneFit>], accepted: &[bool], cloud: &Cloud, dist: f32, waves: u32) {
         if waves > 0 {
             let nearby = NearbyRegions::new(self, accepted, (NEARBY_PER_WAVE * waves) as usize);
-            let plane_of = |i, u, v| nearest_plane(&nearby, fits, cloud, dist, i, u, v);
-            let joined = self.first_wave(&plane_of);
-            self.later_waves(joined, waves, &plane_of);
+            let planes = plane_image(&self.labels, &nearby, fits, cloud, dist);
+            join_waves(&mut self.labels, &planes, waves);
         }
         self.pixels_from_labels();
-    }
-
-    /// Growth's first wave: the unlabelled pixels that a 4-neighbour of their plane's region
-    /// touches, labelled; handed back packed (`pack`).
-    fn first_wave(&mut self, plane_of: &(impl Fn(usize, usize, usize) -> Option<u32> + Sync)) -> Vec<u32> {
-        let (w, h) = (self.labels.width, self.labels.height);
-        let mut candidates: Vec<u32> = Vec::new();
-        let mut beside = vec![0u8; w];
-        for v in 0..h {
-            unlabelled_beside_labelled(&self.labels, v, &mut beside);
-            for_each_set(&beside, |u| candidates.push(pack(u, v)));
-        }
-        let labels = &self.labels.data;
-        let joins: Vec<(u32, u32)> = candidates
-            .par_iter()
-            .with_min_len(256)
-            .filter_map(|&c| {
-                let (u, v) = unpack(c);
-                let i = v * w + u;
-                // The labels of its 4-neighbours (0 off the image), read once.
-                let touching = [
-                    if u > 0 { labels[i - 1] } else { 0 },
-                    if u + 1 < w { labels[i + 1] } else { 0 },
-                    if v > 0 { labels[i - w] } else { 0 },
-                    if v + 1 < h { labels[i + w] } else { 0 },
-                ];
-                let l = plane_of(i, u, v)?;
-                touching.contains(&l).then_some((c, l))
-            })
-            .collect();
-        for &(c, l) in &joins {
-            let (u, v) = unpack(c);
-            self.labels.data[v * w + u] = l;
-        }
-        joins.into_iter().map(|(c, _)| c).collect()
-    }
-
-    /// Growth's waves after the first, breadth first from the pixels that joined it: an
-    /// unlabelled 4-neighbour of a pixel that joined wave k joins wave k + 1 when its plane
-    /// is that pixel's region.
-    fn later_waves(&mut self, first: Vec<u32>, waves: u32, plane_of: &impl Fn(usize, usize, usize) -> Option<u32>) {
-        let (w, h) = (self.labels.width, self.labels.height);
-        // Pixels that joined, with their wave, in the order they joined: a queue.
-        let mut queue: Vec<(u32, u32)> = first.into_iter().map(|c| (c, 1)).collect();
-        let mut next = 0;
-        while let Some(&(c, wave)) = queue.get(next) {
-            next += 1;
-            if wave == waves {
-                continue;
-            }
-            let (u, v) = unpack(c);
-            let i = v * w + u;
-            let l = self.labels.data[i];
-            // The 4-neighbours left, right, up and down: inside, index, (u, v).
-            let neighbours = [
-                (u > 0, i.wrapping_sub(1), (u.wrapping_sub(1), v)),
-                (u + 1 < w, i + 1, (u + 1, v)),
-                (v > 0, i.wrapping_sub(w), (u, v.wrapping_sub(1))),
-                (v + 1 < h, i + w, (u, v + 1)),
-            ];
-            for (inside, j, (nu, nv)) in neighbours {
-                if inside && self.labels.data[j] == 0 && plane_of(j, nu, nv) == Some(l) {
-                    self.labels.data[j] = l;
-                    queue.push((pack(nu, nv), wave + 1));
-                }
-            }
-        }
     }
 
     /// Rebuilds every region's pixel list from the labels: one scan, ascending by
@@ -277,30 +209,140 @@ impl Segmentation {
     }
 }
 
-crate::extract::cpu::widest_simd! {
-    /// 1 in `out` (w long) where pixel (u, v) is unlabelled and a 4-neighbour is labelled.
-    fn unlabelled_beside_labelled(labels: &Grid<u32>, v: usize, out: &mut [u8]) = unlabelled_beside_labelled_portable
+/// Growth's plane of every pixel that no region holds: the label of the accepted region
+/// around it whose plane is nearest its point, within `dist`, the lowest on a tie (as the
+/// tests' per-pixel oracle `nearest_plane` says it); 0 for none and on every labelled pixel.
+fn plane_image(
+    labels: &Grid<u32>,
+    nearby: &NearbyRegions,
+    fits: &[Option<PlaneFit>],
+    cloud: &Cloud,
+    dist: f32,
+) -> Grid<u32> {
+    let w = labels.width;
+    // Label l's plane (normal, offset) at l - 1; NaN for none, within no distance.
+    let planes: Vec<[f64; 4]> =
+        fits.iter().map(|f| f.map_or([f64::NAN; 4], |f| [f.normal.x, f.normal.y, f.normal.z, f.offset])).collect();
+    let mut data = vec![0u32; labels.data.len()];
+    if w > 0 {
+        data.par_chunks_mut(w).enumerate().with_min_len(8).for_each(|(v, out)| {
+            let (held, points) = (&labels.data[v * w..(v + 1) * w], cloud.points(v * w..(v + 1) * w));
+            plane_row(nearby, &planes, points, held, v, dist as f64, out);
+        });
+    }
+    Grid { width: w, height: labels.height, data }
 }
 
-/// Whole rows at a time, comparisons combined with `&` and `|`: the loop vectorises.
+crate::extract::cpu::widest_simd! {
+    /// `plane_image`'s row v: `held` its labels, `points` its points.
+    fn plane_row(
+        nearby: &NearbyRegions,
+        planes: &[[f64; 4]],
+        points: &[[f32; 3]],
+        held: &[u32],
+        v: usize,
+        dist: f64,
+        out: &mut [u32],
+    ) = plane_row_portable
+}
+
+/// A cell's run of pixels at a time, plane by plane across the run: the distance
+/// computed as `PlaneFit::distance` computes it, so the same bits, and the lowest label
+/// kept on a tie by taking only a strictly nearer plane (a cell's labels ascend).
 #[inline(always)]
-fn unlabelled_beside_labelled_portable(labels: &Grid<u32>, v: usize, out: &mut [u8]) {
+fn plane_row_portable(
+    nearby: &NearbyRegions,
+    planes: &[[f64; 4]],
+    points: &[[f32; 3]],
+    held: &[u32],
+    v: usize,
+    dist: f64,
+    out: &mut [u32],
+) {
+    let cells = out.chunks_mut(CELL_PX).zip(held.chunks(CELL_PX)).zip(points.chunks(CELL_PX));
+    for (c, ((out, held), points)) in cells.enumerate() {
+        if held.iter().all(|&l| l != 0) {
+            continue;
+        }
+        let mut nearest = [f64::INFINITY; CELL_PX];
+        let mut label = [0u32; CELL_PX];
+        for &l in nearby.around(c * CELL_PX, v) {
+            let [a, b, c, d] = planes[l as usize - 1];
+            for ((p, nearest), label) in points.iter().zip(&mut nearest).zip(&mut label) {
+                let e = (a * p[0] as f64 + b * p[1] as f64 + c * p[2] as f64 + d).abs();
+                let take = (e < dist) & (e < *nearest);
+                *nearest = if take { e } else { *nearest };
+                *label = if take { l } else { *label };
+            }
+        }
+        for (((o, &h), p), &l) in out.iter_mut().zip(held).zip(points).zip(&label) {
+            *o = if (h == 0) & has_depth(p) { l } else { 0 };
+        }
+    }
+}
+
+/// Growth's waves, each a sweep of the rows that still have a pixel to take: an unlabelled
+/// pixel takes its plane's label (`planes`, 0 for none) when a 4-neighbour had that label
+/// after the wave before. A row's new labels are written back once the row below has read
+/// the old ones; the sweeps stop early once a wave takes nothing.
+fn join_waves(labels: &mut Grid<u32>, planes: &Grid<u32>, waves: u32) {
+    let (w, h) = (labels.width, labels.height);
+    let row = |v: usize| v * w..(v + 1) * w;
+    let mut open: Vec<bool> = (0..h)
+        .map(|v| labels.data[row(v)].iter().zip(&planes.data[row(v)]).any(|(&l, &p)| (l == 0) & (p != 0)))
+        .collect();
+    let mut new = [vec![0u32; w], vec![0u32; w]];
+    for _ in 0..waves {
+        let (mut changed, mut waiting) = (false, None);
+        for v in 0..h {
+            let joined = open[v].then(|| {
+                let (still_open, took) = join_row(labels, planes, v, &mut new[v % 2]);
+                open[v] = still_open;
+                changed |= took;
+                v
+            });
+            if let Some(u) = std::mem::replace(&mut waiting, joined) {
+                labels.data[row(u)].copy_from_slice(&new[u % 2]);
+            }
+        }
+        if let Some(u) = waiting {
+            labels.data[row(u)].copy_from_slice(&new[u % 2]);
+        }
+        if !changed {
+            break;
+        }
+    }
+}
+
+crate::extract::cpu::widest_simd! {
+    /// One wave on row v into `out`: (whether a pixel of the row may still join, whether one did).
+    fn join_row(labels: &Grid<u32>, planes: &Grid<u32>, v: usize, out: &mut [u32]) -> (bool, bool) = join_row_portable
+}
+
+/// Whole rows at a time, comparisons combined with `&` and `|`: the loops vectorise. A
+/// pixel's plane is never 0 where it joins, so a neighbour beyond the image (0, or the
+/// row itself standing in above and below: 0 at an unlabelled pixel) never matches.
+#[inline(always)]
+fn join_row_portable(labels: &Grid<u32>, planes: &Grid<u32>, v: usize, out: &mut [u32]) -> (bool, bool) {
     let (w, h) = (labels.width, labels.height);
     let row = &labels.data[v * w..(v + 1) * w];
-    // Rows beyond the image: the row itself stands in (an unlabelled pixel's own label is 0).
+    let plane = &planes.data[v * w..(v + 1) * w];
     let above = if v > 0 { &labels.data[(v - 1) * w..v * w] } else { row };
     let below = if v + 1 < h { &labels.data[(v + 1) * w..(v + 2) * w] } else { row };
     let out = &mut out[..w];
     for u in 0..w {
-        out[u] = u8::from((row[u] == 0) & ((above[u] != 0) | (below[u] != 0)));
+        let (x, p) = (row[u], plane[u]);
+        out[u] = if (x == 0) & (p != 0) & ((above[u] == p) | (below[u] == p)) { p } else { x };
     }
-    // Left and right neighbours (zip stops at the row's end).
-    for ((o, &x), &right) in out.iter_mut().zip(row).zip(&row[1..]) {
-        *o |= u8::from((x == 0) & (right != 0));
+    for ((o, (&x, &p)), &right) in out.iter_mut().zip(row.iter().zip(plane)).zip(&row[1..]) {
+        *o = if (x == 0) & (p != 0) & (right == p) { p } else { *o };
     }
-    for ((o, &x), &left) in out[1..].iter_mut().zip(&row[1..]).zip(row) {
-        *o |= u8::from((x == 0) & (left != 0));
+    for ((o, (&x, &p)), &left) in out[1..].iter_mut().zip(row[1..].iter().zip(&plane[1..])).zip(row) {
+        *o = if (x == 0) & (p != 0) & (left == p) { p } else { *o };
     }
+    let still_open = out.iter().zip(plane).fold(false, |any, (&o, &p)| any | ((o == 0) & (p != 0)));
+    let took = out.iter().zip(row).fold(false, |any, (&o, &x)| any | (o != x));
+    (still_open, took)
 }
 
 crate::extract::cpu::widest_simd! {
@@ -309,7 +351,7 @@ crate::extract::cpu::widest_simd! {
     fn labelled_after_another(labels: &Grid<u32>, v: usize, out: &mut [u8]) = labelled_after_another_portable
 }
 
-/// Whole rows at a time, as `unlabelled_beside_labelled_portable`.
+/// Whole rows at a time, as `join_row_portable`.
 #[inline(always)]
 fn labelled_after_another_portable(labels: &Grid<u32>, v: usize, out: &mut [u8]) {
     let w = labels.width;
@@ -579,43 +621,6 @@ const JOIN_ANGLE_COS: f64 = 0.985;
 /// across all of it.
 const NEARBY_PER_WAVE: u32 = 4;
 
-/// The label of the accepted region around pixel i = (u, v) whose plane is nearest to the
-/// pixel's point, within `dist` (the lowest label on a tie); None for none or an invalid pixel.
-fn nearest_plane(
-    nearby: &NearbyRegions,
-    fits: &[Option<PlaneFit>],
-    cloud: &Cloud,
-    dist: f32,
-    i: usize,
-    u: usize,
-    v: usize,
-) -> Option<u32> {
-    let p = cloud.point(i)?;
-    let mut best: Option<(f64, u32)> = None;
-    for &l in nearby.around(u, v) {
-        let Some(fit) = &fits[l as usize - 1] else { continue };
-        let e = fit.distance(&p);
-        if e < dist as f64 && best.is_none_or(|(b, bl)| e < b || (e == b && l < bl)) {
-            best = Some((e, l));
-        }
-    }
-    best.map(|(_, l)| l)
-}
-
-/// Pixel (u, v) packed as v << 16 | u, ordered as its index; Intrinsics hold images to
-/// 8192 a side. Growth's queues hold pixels so: an index would cost two divisions to find
-/// a pixel's neighbours and cell.
-#[inline]
-fn pack(u: usize, v: usize) -> u32 {
-    (v << 16 | u) as u32
-}
-
-/// Pixel (u, v) of a packed v << 16 | u.
-#[inline]
-fn unpack(c: u32) -> (usize, usize) {
-    ((c & 0xffff) as usize, (c >> 16) as usize)
-}
-
 /// Side of the square cells of `NearbyRegions`, pixels.
 const CELL_PX: usize = 16;
 
@@ -701,6 +706,30 @@ impl PlaneFit {
 mod tests {
     use super::*;
     use crate::extract::cpu::ransac::hash;
+
+    /// Growth's plane of one pixel, the oracle of `plane_row`: the label of the accepted region
+    /// around pixel i = (u, v) whose plane is nearest to the pixel's point, within `dist` (the
+    /// lowest label on a tie); None for none or an invalid pixel.
+    fn nearest_plane(
+        nearby: &NearbyRegions,
+        fits: &[Option<PlaneFit>],
+        cloud: &Cloud,
+        dist: f32,
+        i: usize,
+        u: usize,
+        v: usize,
+    ) -> Option<u32> {
+        let p = cloud.point(i)?;
+        let mut best: Option<(f64, u32)> = None;
+        for &l in nearby.around(u, v) {
+            let Some(fit) = &fits[l as usize - 1] else { continue };
+            let e = fit.distance(&p);
+            if e < dist as f64 && best.is_none_or(|(b, bl)| e < b || (e == b && l < bl)) {
+                best = Some((e, l));
+            }
+        }
+        best.map(|(_, l)| l)
+    }
 
     /// Growth as its definition says it, the oracle: each wave a sweep of the whole image
     /// that labels an unlabelled pixel when a 4-neighbour had its plane's label after the
@@ -807,6 +836,7 @@ mod tests {
 
     #[test]
     fn row_scans_are_the_pixel_by_pixel_ones() {
+        // Growth's wave on a row, and where rows and columns enter a region.
         // Labels in blobs and specks, 0 between, on widths that leave every remainder of
         // the eight-byte words and of the vectors.
         for (w, h) in [(1, 1), (1, 5), (7, 3), (37, 29), (70, 11)] {
@@ -831,14 +861,28 @@ mod tests {
                     labels.data[v as usize * w + u as usize]
                 }
             };
-            let mut want = Vec::new();
+            // Each pixel's plane: a label near the pixel's own blob, or none.
+            let plane = |u: isize, v: isize| {
+                let h = hash((u * 31 + v * 7) as u32);
+                if h.is_multiple_of(4) { 0 } else { 1 + (u as u32 + h % 3) / 9 }
+            };
+            let planes = Grid {
+                width: w,
+                height: h,
+                data: (0..w * h).map(|i| plane((i % w) as isize, (i / w) as isize)).collect(),
+            };
+            // One wave of growth by its definition: an unlabelled pixel takes its plane
+            // when a 4-neighbour holds it.
+            let (mut want, mut want_open, mut want_took) = (Vec::new(), vec![false; h], vec![false; h]);
             for v in 0..h as isize {
                 for u in 0..w as isize {
-                    if at(u, v) == 0
-                        && [(-1, 0), (1, 0), (0, -1), (0, 1)].iter().any(|(du, dv)| at(u + du, v + dv) != 0)
-                    {
-                        want.push((u as usize, v as usize));
-                    }
+                    let p = plane(u, v);
+                    let joins = at(u, v) == 0
+                        && p != 0
+                        && [(-1, 0), (1, 0), (0, -1), (0, 1)].iter().any(|(du, dv)| at(u + du, v + dv) == p);
+                    want.push(if joins { p } else { at(u, v) });
+                    want_open[v as usize] |= !joins && at(u, v) == 0 && p != 0;
+                    want_took[v as usize] |= joins;
                 }
             }
             // Where a row or a column enters a region (the creases' and joins' scan).
@@ -851,17 +895,18 @@ mod tests {
                     }
                 }
             }
-            let (mut got, mut got_entries) = (Vec::new(), Vec::new());
+            let (mut got, mut got_entries) = (vec![0u32; w * h], Vec::new());
             let mut mask = vec![0u8; w];
             for v in 0..h {
-                unlabelled_beside_labelled(&labels, v, &mut mask);
-                for_each_set(&mask, |u| got.push((u, v)));
+                let (open, took) = join_row(&labels, &planes, v, &mut got[v * w..(v + 1) * w]);
+                assert_eq!((open, took), (want_open[v], want_took[v]), "{w} x {h}, row {v}");
                 labelled_after_another(&labels, v, &mut mask);
                 for_each_set(&mask, |u| got_entries.push((u, v)));
             }
             assert_eq!(got, want, "{w} x {h}");
             assert_eq!(got_entries, entries, "{w} x {h}");
-            assert!(w * h < 100 || (want.len() > 20 && entries.len() > 20), "{w} x {h}: borders to find");
+            let joined = want.iter().zip(&labels.data).filter(|(a, b)| a != b).count();
+            assert!(w * h < 100 || (joined > 20 && entries.len() > 20), "{w} x {h}: borders to find");
         }
         // Any non-zero byte counts, in a word and in the tail.
         let mut set = Vec::new();
