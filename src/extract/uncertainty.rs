@@ -368,21 +368,49 @@ impl HalvesAgreement {
 /// (the support is too narrow to test, or to trust).
 pub fn halves_agreement(points: &[[f32; 3]], fit: &PlaneFit, dist: f64) -> Option<HalvesAgreement> {
     let stride = points.len().div_ceil(MAX_POINTS).max(1);
-    let inliers: Vec<[f32; 3]> = points.iter().step_by(stride).filter(|p| fit.distance(p) < dist).copied().collect();
-    let v = |p: &[f32; 3]| Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-    let c = inliers.iter().map(v).sum::<Vector3<f64>>() / inliers.len().max(1) as f64;
-    let scatter = inliers.iter().map(|p| (v(p) - c) * (v(p) - c).transpose()).sum::<Matrix3<f64>>();
+    let v = |p: &[f32; 3]| [p[0] as f64, p[1] as f64, p[2] as f64];
+    // Every stride-th point's inliers and their sum, in one plain indexed loop (a `step_by`
+    // iterator collected into a growing Vec was a third of this function's time).
+    let mut inliers: Vec<[f32; 3]> = Vec::with_capacity(points.len().div_ceil(stride));
+    let mut sum = [0.0f64; 3];
+    let mut i = 0;
+    while let Some(p) = points.get(i) {
+        if fit.distance(p) < dist {
+            inliers.push(*p);
+            let q = v(p);
+            sum = [sum[0] + q[0], sum[1] + q[1], sum[2] + q[2]];
+        }
+        i += stride;
+    }
+    let count = inliers.len().max(1) as f64;
+    let c = [sum[0] / count, sum[1] / count, sum[2] / count];
+    // The scatter's six distinct sums, added point by point in order.
+    let mut s = [0.0f64; 6];
+    for p in &inliers {
+        let q = v(p);
+        let d = [q[0] - c[0], q[1] - c[1], q[2] - c[2]];
+        let products = [d[0] * d[0], d[0] * d[1], d[0] * d[2], d[1] * d[1], d[1] * d[2], d[2] * d[2]];
+        for (s, x) in s.iter_mut().zip(products) {
+            *s += x;
+        }
+    }
+    let scatter = Matrix3::new(s[0], s[1], s[2], s[1], s[3], s[4], s[2], s[4], s[5]);
     // The in-plane direction of least spread: the middle eigenvector of the scatter.
     let eig = SymmetricEigen::new(scatter);
     let mut order = [0, 1, 2];
     order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
     let across: Vector3<f64> = eig.eigenvectors.column(order[1]).into();
-    let (low, high): (Vec<[f32; 3]>, Vec<[f32; 3]>) = inliers.iter().partition(|p| (v(p) - c).dot(&across) < 0.0);
+    let (c, across) = (Vector3::from(c), across);
+    let mut halves = [Vec::with_capacity(inliers.len()), Vec::with_capacity(inliers.len())];
+    for p in &inliers {
+        let below = (Vector3::from(v(p)) - c).dot(&across) < 0.0;
+        halves[usize::from(!below)].push(*p);
+    }
     let half = |pts: &[[f32; 3]]| {
         let f = super::cpu::ransac::refit(pts, fit.normal_f32(), fit.offset as f32, dist as f32)?;
         Some((f.normal, plane_uncertainty(pts, &f, dist)?.tilt_sigma_rad()))
     };
-    let ((na, sa), (nb, sb)) = (half(&low)?, half(&high)?);
+    let ((na, sa), (nb, sb)) = (half(&halves[0])?, half(&halves[1])?);
     Some(HalvesAgreement { angle_rad: na.dot(&nb).clamp(-1.0, 1.0).acos(), sigma_rad: sa.hypot(sb) })
 }
 
