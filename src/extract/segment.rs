@@ -523,9 +523,9 @@ impl Segmentation {
             for &i in &moved {
                 self.labels.data[i as usize] = a as u32 + 1;
             }
+            let before = self.pixels[a].len();
             self.pixels[a].extend(moved);
-            // Two ascending runs: the stable sort finds them and merges, in linear time.
-            self.pixels[a].sort();
+            merge_tail(&mut self.pixels[a], before);
             (fits[a], fits[b]) = (Some(joined), None);
             now_in[b] = a;
             joined_into[a] = true;
@@ -590,18 +590,38 @@ impl Segmentation {
             }
         }
         // Rows' fills first: where a gap is both, the row's fill is the one kept.
+        let before: Vec<usize> = self.pixels.iter().map(Vec::len).collect();
         for (i, l) in row_fills.into_iter().chain(column_fills) {
             if self.labels.data[i as usize] == 0 {
                 self.labels.data[i as usize] = l;
                 self.pixels[l as usize - 1].push(i);
             }
         }
-        for (r, p) in self.pixels.iter_mut().enumerate() {
-            if regions[r] {
-                // An ascending run and the few fills after it: the stable sort sorts those
-                // and merges the two runs, in about linear time.
-                p.sort();
-            }
+        for (p, before) in self.pixels.iter_mut().zip(before) {
+            merge_tail(p, before);
+        }
+    }
+}
+
+/// Sorts a list whose first `sorted` entries ascend and whose tail (appended after them,
+/// in any order, none equal to an entry before) is short or ascends too: the tail is
+/// sorted, then merged in from the back, in place. A full sort found the two runs and
+/// merged them too, through a buffer of half the list.
+fn merge_tail(list: &mut Vec<u32>, sorted: usize) {
+    let mut tail = list.split_off(sorted);
+    if tail.is_empty() {
+        return;
+    }
+    tail.sort_unstable();
+    let (mut a, mut b) = (list.len(), tail.len());
+    list.resize(a + b, 0);
+    while b > 0 {
+        if a > 0 && list[a - 1] > tail[b - 1] {
+            list[a + b - 1] = list[a - 1];
+            a -= 1;
+        } else {
+            list[a + b - 1] = tail[b - 1];
+            b -= 1;
         }
     }
 }
@@ -813,6 +833,34 @@ mod tests {
                 assert!(waves > 2 || left > 100, "{dist}, {waves} waves: left {left}");
                 let listed: usize = seg.pixels.iter().map(Vec::len).sum();
                 assert_eq!(listed, want.iter().filter(|&&l| l != 0).count(), "pixel lists follow the labels");
+            }
+        }
+    }
+
+    #[test]
+    fn merge_tail_sorts_as_a_full_sort_does() {
+        // Ascending heads of every length to 40, tails of 0 to 9 values not in the head, in
+        // hashed order (the fills) or ascending (a joined region's pixels).
+        for n in 0..40u32 {
+            for k in 0..10u32 {
+                let all: Vec<u32> = (0..n + k).map(|i| i * 3 + hash(i * 7 + n) % 3).collect();
+                let mut tail_of = |ascending: bool| {
+                    let (mut head, mut tail) = (Vec::new(), Vec::new());
+                    for (i, &x) in all.iter().enumerate() {
+                        if hash(i as u32 + 101 * n + 7 * k) % (n + k) < k { tail.push(x) } else { head.push(x) }
+                    }
+                    if !ascending {
+                        tail.sort_by_key(|&x| hash(x));
+                    }
+                    let sorted = head.len();
+                    head.extend(tail);
+                    let mut want = head.clone();
+                    want.sort();
+                    merge_tail(&mut head, sorted);
+                    assert_eq!(head, want, "{n} + {k}, ascending tail {ascending}");
+                };
+                tail_of(true);
+                tail_of(false);
             }
         }
     }
