@@ -26,7 +26,7 @@ fn bench(c: &mut Criterion) {
         c.bench_function(&format!("cpu diffusion {size}"), |b| b.iter(|| diffusion::diffuse(&depth, 12.0, 4, kappa)));
         let smoothed = diffusion::diffuse(&depth, 12.0, 4, kappa);
         c.bench_function(&format!("cpu normals {size}"), |b| b.iter(|| normals::normals(&smoothed, &intr, 5)));
-        let (_, planes) = normals::normals_and_planes(&smoothed, &intr, 5);
+        let planes = normals::normal_planes(&smoothed, &intr, 5);
         c.bench_function(&format!("cpu edges {size}"), |b| {
             b.iter(|| {
                 let e = canny::canny(&canny::gradient_of_planes(&planes), 0.05, 0.1);

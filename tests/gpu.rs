@@ -76,8 +76,7 @@ fn image_stages_agree_with_the_cpu_twin_on_every_mock_sequence() {
         // Zeros (invalid) must agree exactly: holes are never filled by either twin.
         assert!(g.smoothed.data.iter().zip(&c.smoothed.data).all(|(a, b)| (*a == 0.0) == (*b == 0.0)));
 
-        let flat = |g: &Grid<[f32; 3]>| g.data.iter().flatten().copied().collect::<Vec<f32>>();
-        let d = max_abs_diff(&flat(&g.normals), &flat(&c.normals));
+        let d = max_abs_diff(&g.normals.data, &c.normals.data);
         assert!(d <= 1e-4, "{name} frame {k}: normals differ by {d}");
 
         // Edges and boundary from each twin's own inputs, as the pipelines run them.
@@ -135,15 +134,14 @@ fn normals_and_edges_alone_agree_with_the_cpu_twin_on_the_same_input() {
         let (g, _) = gpu_images(&mut gpu, &smoothed, &seq, &stages_only);
         assert_eq!(g.smoothed.data, smoothed.data, "{name} frame {k}: no steps, no change");
 
-        let n = normals::normals(&smoothed, &seq.intrinsics, cfg.normal_kernel);
-        let flat = |g: &Grid<[f32; 3]>| g.data.iter().flatten().copied().collect::<Vec<f32>>();
-        let d = max_abs_diff(&flat(&g.normals), &flat(&n));
+        let n = normals::normal_planes(&smoothed, &seq.intrinsics, cfg.normal_kernel);
+        let d = max_abs_diff(&g.normals.data, &n.data);
         assert!(d <= 1e-5, "{name} frame {k}: normals differ by {d}");
         worst_normal = worst_normal.max(d);
 
         // Canny's edges, from each twin's normals (equal to 1e-5: only a magnitude within
         // rounding of a threshold or a tie may flip a pixel, and hysteresis its line).
-        let class = canny::classify(&canny::normal_gradient(&n), cfg.canny_low as f32, cfg.canny_high as f32);
+        let class = canny::classify(&canny::gradient_of_planes(&n), cfg.canny_low as f32, cfg.canny_high as f32);
         let share = share_differing(&components::hysteresis(&class), &g.canny);
         assert!(share < 0.001, "{name} frame {k}: edges differ in {:.3} % of pixels", share * 100.0);
         assert!(class.data.contains(&2), "{name} frame {k}: the stairs have strong edges");
@@ -160,7 +158,7 @@ fn cpu_inputs(step: usize) -> Vec<(String, usize, Grid<u8>, Images)> {
         .map(|(name, seq, k)| {
             let depth = depth_metres(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
             let images = cpu::image_stages(&depth, &seq.intrinsics, &cfg, &mut Default::default(), &mut || 0.0);
-            let grad = canny::normal_gradient(&images.normals);
+            let grad = canny::gradient_of_planes(&images.normals);
             (name, k, canny::classify(&grad, cfg.canny_low as f32, cfg.canny_high as f32), images)
         })
         .collect()
@@ -181,7 +179,7 @@ fn hysteresis_boundary_and_regions_alone_are_the_cpu_twin_s_bit_for_bit() {
             "{name} frame {k}: weak pixels dropped"
         );
 
-        let boundary = gpu.boundary_alone(&c.canny, &c.smoothed, &c.normals, &cfg).unwrap();
+        let boundary = gpu.boundary_alone(&c.canny, &c.smoothed, &c.normals.interleaved(), &cfg).unwrap();
         assert_eq!(boundary, c.boundary, "{name} frame {k}: boundary");
 
         let roots = gpu.regions_alone(&c.boundary).unwrap();

@@ -24,7 +24,7 @@ pub fn write_stage_images(
     depth.save(dir.join("1_depth.png"))?;
     if let Some(images) = &stages.images {
         viz::depth_image(w, h, |i| images.smoothed.data[i] as f64, near, far).save(dir.join("2_smoothed.png"))?;
-        viz::normal_image(w, h, &images.normals.data).save(dir.join("3_normals.png"))?;
+        viz::normal_image(w, h, &images.normals.interleaved().data).save(dir.join("3_normals.png"))?;
         // Canny edges white, the rest of the closed boundary grey.
         RgbImage::from_fn(w, h, |u, v| {
             let i = (v * w + u) as usize;

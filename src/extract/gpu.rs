@@ -10,7 +10,7 @@
 use wgpu::util::DeviceExt;
 
 use super::cpu::morphology::closing_passes;
-use super::cpu::normals::sobel_kernel;
+use super::cpu::normals::{NormalPlanes, sobel_kernel};
 use super::cpu::ransac::{MAX_SCORE_POINTS, PointBatch};
 use super::{Grid, Images};
 use crate::config::PipelineConfig;
@@ -750,7 +750,11 @@ impl Gpu {
             let bytes = |k: usize| words[k * n..(k + 1) * n].iter().map(|&b| b as u8).collect::<Vec<u8>>();
             let images = images.then(|| Images {
                 smoothed: grid(w, h, floats(1, 1).to_vec()),
-                normals: grid(w, h, floats(2, 3).chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()),
+                normals: NormalPlanes::of(&grid(
+                    w,
+                    h,
+                    floats(2, 3).chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+                )),
                 canny: grid(w, h, bytes(5)),
                 boundary: grid(w, h, bytes(6)),
             });

@@ -78,7 +78,8 @@ pub struct Stages {
 #[derive(Clone, Debug)]
 pub struct Images {
     pub smoothed: Grid<f32>,
-    pub normals: Grid<[f32; 3]>,
+    /// The normals as planes (`NormalPlanes::interleaved` gives them back as the GPU writes them).
+    pub normals: cpu::normals::NormalPlanes,
     /// Canny edges after hysteresis.
     pub canny: Grid<u8>,
     /// Closed edge lines (Canny + depth steps) plus no-normal pixels: 1 = not inside any region.

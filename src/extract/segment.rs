@@ -844,7 +844,7 @@ mod tests {
         for n in 0..40u32 {
             for k in 0..10u32 {
                 let all: Vec<u32> = (0..n + k).map(|i| i * 3 + hash(i * 7 + n) % 3).collect();
-                let mut tail_of = |ascending: bool| {
+                let check = |ascending: bool| {
                     let (mut head, mut tail) = (Vec::new(), Vec::new());
                     for (i, &x) in all.iter().enumerate() {
                         if hash(i as u32 + 101 * n + 7 * k) % (n + k) < k { tail.push(x) } else { head.push(x) }
@@ -859,8 +859,8 @@ mod tests {
                     merge_tail(&mut head, sorted);
                     assert_eq!(head, want, "{n} + {k}, ascending tail {ascending}");
                 };
-                tail_of(true);
-                tail_of(false);
+                check(true);
+                check(false);
             }
         }
     }

@@ -26,15 +26,15 @@ pub fn image_stages(
     let smoothed =
         diffusion::diffuse(depth, cfg.diffusion_time as f32, cfg.diffusion_steps, cfg.diffusion_kappa_m as f32);
     times.diffusion = lap();
-    let (normals, planes) = normals::normals_and_planes(&smoothed, intr, cfg.normal_kernel);
+    let normals = normals::normal_planes(&smoothed, intr, cfg.normal_kernel);
     times.normals = lap();
-    let class = canny::classify(&canny::gradient_of_planes(&planes), cfg.canny_low as f32, cfg.canny_high as f32);
+    let class = canny::classify(&canny::gradient_of_planes(&normals), cfg.canny_low as f32, cfg.canny_high as f32);
     let canny = components::hysteresis(&class);
     let boundary = boundary::boundary(
         &canny,
         &smoothed,
         cfg.depth_edge_ratio as f32,
-        &planes,
+        &normals,
         cfg.closing_kernel_px,
         cfg.normal_kernel,
     );

@@ -24,9 +24,10 @@ pub fn sobel_kernel(size: u32) -> (&'static [f32], &'static [f32], f32) {
     }
 }
 
-/// Unit normals in the camera frame, [0, 0, 0] where not every tap is valid.
+/// Unit normals in the camera frame, [0, 0, 0] where not every tap is valid, interleaved
+/// (as shaders/normals.wgsl writes them).
 pub fn normals(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32) -> Grid<[f32; 3]> {
-    normals_and_planes(depth, intr, kernel).0
+    normal_planes(depth, intr, kernel).interleaved()
 }
 
 /// Normals as planes, for the gradient: row v is [x; w] [y; w] [z; w] [1 where a normal,
@@ -55,10 +56,21 @@ impl NormalPlanes {
         );
         NormalPlanes { width: w, height: normals.height, data }
     }
+
+    /// The normals interleaved again, as the GPU stage writes them (for pictures and the
+    /// GPU twin's inputs; the frame itself reads only the planes).
+    pub fn interleaved(&self) -> Grid<[f32; 3]> {
+        let w = self.width;
+        let data = (self.data.chunks(4 * w))
+            .flat_map(|row| (0..w).map(move |u| [row[u], row[w + u], row[2 * w + u]]))
+            .collect();
+        Grid { width: w, height: self.height, data }
+    }
 }
 
-/// `normals`, and the same normals as planes, in one pass.
-pub fn normals_and_planes(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32) -> (Grid<[f32; 3]>, NormalPlanes) {
+/// The normals stage: `normals` as planes, the only form the frame reads (the gradient,
+/// the boundary's validity), so no interleaved copy is written.
+pub fn normal_planes(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32) -> NormalPlanes {
     let (w, h) = (depth.width, depth.height);
     let (smooth, deriv, norm) = sobel_kernel(kernel);
     let r = smooth.len() / 2;
@@ -69,37 +81,26 @@ pub fn normals_and_planes(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32) -> 
     // invalid pixels dilated by the kernel's square, the outside counting as invalid.
     let invalid = Grid { width: w, height: h, data: z.iter().map(|&z| u8::from(z == 0.0)).collect() };
     let spoiled = morphology::dilate(&invalid, r, 1);
-    let mut data = vec![[0.0f32; 3]; w * h];
     let mut planes = vec![0.0f32; 4 * w * h];
-    data.par_chunks_mut(w).zip(planes.par_chunks_mut(4 * w)).enumerate().with_min_len(ROWS_PER_TASK).for_each(
-        |(v, (out, planes))| {
-            let row = v * w..(v + 1) * w;
-            let camera = [fx, fy, cx, cy, norm, v as f32];
-            normals_row(&z[row.clone()], &zu[row.clone()], &zv[row.clone()], &spoiled.data[row], out, planes, camera);
-        },
-    );
-    (Grid { width: w, height: h, data }, NormalPlanes { width: w, height: h, data: planes })
+    planes.par_chunks_mut(4 * w).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, planes)| {
+        let row = v * w..(v + 1) * w;
+        let camera = [fx, fy, cx, cy, norm, v as f32];
+        normals_row(&z[row.clone()], &zu[row.clone()], &zv[row.clone()], &spoiled.data[row], planes, camera);
+    });
+    NormalPlanes { width: w, height: h, data: planes }
 }
 
 super::widest_simd! {
-    /// One row of normals, interleaved into `out` and as four planes into `planes` (4w);
-    /// `camera` is [fx, fy, cx, cy, the Sobel norm, the row's v].
-    fn normals_row(z: &[f32], zu: &[f32], zv: &[f32], spoiled: &[u8], out: &mut [[f32; 3]], planes: &mut [f32], camera: [f32; 6]) = normals_row_portable
+    /// One row of normals as four planes into `planes` (4w); `camera` is [fx, fy, cx, cy,
+    /// the Sobel norm, the row's v].
+    fn normals_row(z: &[f32], zu: &[f32], zv: &[f32], spoiled: &[u8], planes: &mut [f32], camera: [f32; 6]) = normals_row_portable
 }
 
 /// Equal-length slices and a branch-free `surface_normal`: the loop vectorises.
 #[inline(always)]
-fn normals_row_portable(
-    z: &[f32],
-    zu: &[f32],
-    zv: &[f32],
-    spoiled: &[u8],
-    out: &mut [[f32; 3]],
-    planes: &mut [f32],
-    camera: [f32; 6],
-) {
+fn normals_row_portable(z: &[f32], zu: &[f32], zv: &[f32], spoiled: &[u8], planes: &mut [f32], camera: [f32; 6]) {
     let [fx, fy, cx, cy, norm, v] = camera;
-    let n = out.len();
+    let n = z.len();
     let (z, zu, zv, spoiled) = (&z[..n], &zu[..n], &zv[..n], &spoiled[..n]);
     let (x, rest) = planes[..4 * n].split_at_mut(n);
     let (y, rest) = rest.split_at_mut(n);
@@ -108,7 +109,6 @@ fn normals_row_portable(
     for u in 0..n {
         let normal = surface_normal(z[u], zu[u] / norm, zv[u] / norm, u as f32, v, fx, fy, cx, cy);
         let normal = if spoiled[u] == 0 { normal } else { [0.0; 3] };
-        out[u] = normal;
         (x[u], y[u], zn[u]) = (normal[0], normal[1], normal[2]);
         // `|`, not `!=` on the arrays (which stops at the first difference): no branches.
         valid[u] = f32::from(u8::from((normal[0] != 0.0) | (normal[1] != 0.0) | (normal[2] != 0.0)));
@@ -181,8 +181,9 @@ mod tests {
             .collect();
         let depth = Grid { width: w, height: intr.height as usize, data };
         for kernel in [3, 5, 7] {
-            let (fast, planes) = normals_and_planes(&depth, &intr, kernel);
-            assert_eq!(planes, NormalPlanes::of(&fast), "kernel {kernel}: the planes are the normals");
+            let planes = normal_planes(&depth, &intr, kernel);
+            let fast = planes.interleaved();
+            assert_eq!(planes, NormalPlanes::of(&fast), "kernel {kernel}: the validity plane is the normals'");
             for v in 0..depth.height {
                 for u in 0..w {
                     let want = normal_at(&depth, &intr, kernel, u, v);
