@@ -1,6 +1,8 @@
 //! Row-major pixel grids and their connected components, for extraction, the map's
 //! clearing and the evaluation alike.
 
+use std::ops::{BitOr, BitXor};
+
 /// A row-major image of any pixel type.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Grid<T> {
@@ -62,14 +64,19 @@ pub fn leading(holds: impl Fn(usize) -> bool) -> usize {
     no
 }
 
-/// The index of the first of `values` other than `value`, if one is: sixteen at a time,
-/// each block tested by one OR of XORs, which vectorises (a search value by value does
-/// not). Label runs are tens to hundreds of pixels long.
-pub fn first_other(values: &[u32], value: u32) -> Option<usize> {
-    let mut blocks = values.chunks_exact(16);
+/// The index of the first of `values` other than `value`, if one is: a 64-byte block at a
+/// time (sixteen labels, 64 flags), each block tested by one OR of XORs, which vectorises
+/// (a search value by value does not). Label runs are tens to hundreds of pixels long, and
+/// so are the runs of a region's inside.
+pub fn first_other<T>(values: &[T], value: T) -> Option<usize>
+where
+    T: Copy + PartialEq + Default + BitXor<Output = T> + BitOr<Output = T>,
+{
+    let block_len = 64 / size_of::<T>();
+    let mut blocks = values.chunks_exact(block_len);
     for (k, block) in (&mut blocks).enumerate() {
-        if block.iter().fold(0, |any, &x| any | (x ^ value)) != 0 {
-            return block.iter().position(|&x| x != value).map(|j| 16 * k + j);
+        if block.iter().fold(T::default(), |any, &x| any | (x ^ value)) != T::default() {
+            return block.iter().position(|&x| x != value).map(|j| block_len * k + j);
         }
     }
     let start = values.len() - blocks.remainder().len();
@@ -154,9 +161,9 @@ pub fn component_runs(inside: &[bool], w: usize, h: usize) -> (Vec<ComponentRun>
         let row = &inside[v * w..(v + 1) * w];
         let first = runs.len();
         let mut u = 0;
-        while let Some(skip) = row[u..].iter().position(|&b| b) {
+        while let Some(skip) = first_other(&row[u..], false) {
             let start = u + skip;
-            u = start + row[start..].iter().position(|&b| !b).unwrap_or(w - start);
+            u = start + first_other(&row[start..], true).unwrap_or(w - start);
             let me = runs.len() as u32;
             runs.push(ComponentRun { start: v * w + start, end: v * w + u, label: 0 });
             parent.push(me);
@@ -218,6 +225,15 @@ mod tests {
                 values[at] = 0;
                 values[len - 1] = 1;
                 assert_eq!(first_other(&values, 7), Some(at), "len {len}, other at {at}");
+            }
+        }
+        // Flags: blocks of 64, every length to three blocks and a remainder.
+        for len in 0..200 {
+            assert_eq!(first_other(&vec![true; len], true), None);
+            for at in (0..len).step_by(7) {
+                let mut flags = vec![false; len];
+                flags[at] = true;
+                assert_eq!(first_other(&flags, false), Some(at), "len {len}, flag at {at}");
             }
         }
     }
