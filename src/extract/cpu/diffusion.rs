@@ -100,6 +100,7 @@ fn solve_rows(u: &mut Grid<f32>, step: f32, inv_kappa: f32) {
         with_scratch(w * lanes, |block, e, out| {
             transpose(band, lanes, w, block);
             solve_down(block, lanes, lanes, step, inv_kappa, e, out);
+            out.iter_mut().zip(&*block).for_each(|(o, &z)| *o += z);
             transpose(out, w, lanes, band);
         })
     });
@@ -184,11 +185,12 @@ fn solve_columns(u: &Grid<f32>, next: &mut Grid<f32>, step: f32, inv_kappa: f32)
         let lanes = LANES.min(w - x0);
         with_scratch(h * lanes, |_, e, out| {
             solve_down(&u.data[x0..], w, lanes, step, inv_kappa, e, out);
-            for (y, line) in out.chunks_exact(lanes).enumerate() {
+            for (y, change) in out.chunks_exact(lanes).enumerate() {
+                let at = y * w + x0;
                 // SAFETY: `next` holds w * h values and outlives the pass; this task alone
                 // writes columns x0..x0 + lanes (the stripes are disjoint), and nothing
                 // reads `next` until the pass is over.
-                unsafe { dst.write(y * w + x0, line) };
+                unsafe { dst.write_sum(at, change, &u.data[at..at + lanes]) };
             }
         })
     });
@@ -200,19 +202,24 @@ struct StripeWriter(*mut f32);
 unsafe impl Sync for StripeWriter {}
 
 impl StripeWriter {
-    /// Copies `values` to the image from index `at` on.
+    /// Writes `change + depth`, element by element, to the image from index `at` on: the
+    /// solve's last step and the copy out in one pass.
     ///
     /// # Safety
-    /// `at + values.len()` is within the image, and no other thread touches those values meanwhile.
-    unsafe fn write(&self, at: usize, values: &[f32]) {
-        // SAFETY: as the caller promises.
-        unsafe { std::ptr::copy_nonoverlapping(values.as_ptr(), self.0.add(at), values.len()) }
+    /// `at + change.len()` is within the image, `depth` is as long as `change`, and no
+    /// other thread touches those values meanwhile.
+    unsafe fn write_sum(&self, at: usize, change: &[f32], depth: &[f32]) {
+        for (k, (&c, &z)) in change.iter().zip(depth).enumerate() {
+            // SAFETY: as the caller promises.
+            unsafe { *self.0.add(at + k) = c + z };
+        }
     }
 }
 
 super::widest_simd! {
     /// Solves `lanes` lines side by side, each running down: element i of lane k is
-    /// `src[i * stride + k]`, and `out[i * lanes + k]` (`e` is the elimination's scratch).
+    /// `src[i * stride + k]`, and its change `out[i * lanes + k]` (`e` is the elimination's
+    /// scratch); the caller adds the depth as it writes the result where it goes.
     fn solve_down(src: &[f32], stride: usize, lanes: usize, step: f32, inv_kappa: f32, e: &mut [f32], out: &mut [f32]) = solve_down_portable
 }
 
@@ -288,12 +295,6 @@ fn solve_lanes<const FIXED: usize>(
         let (row, next, e_row) = (&mut head[i * lanes..], &tail[..lanes], &e[i * lanes..(i + 1) * lanes]);
         for k in 0..lanes {
             row[k] += e_row[k] * next[k];
-        }
-    }
-    for i in 0..len {
-        let (row, z) = (&mut out[i * lanes..(i + 1) * lanes], &src[i * stride..i * stride + lanes]);
-        for k in 0..lanes {
-            row[k] += z[k];
         }
     }
 }
