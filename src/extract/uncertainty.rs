@@ -400,7 +400,7 @@ pub fn halves_agreement(points: &[[f32; 3]], fit: &PlaneFit, dist: f64) -> Optio
     let mut order = [0, 1, 2];
     order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
     let across: Vector3<f64> = eig.eigenvectors.column(order[1]).into();
-    let (c, across) = (Vector3::from(c), across);
+    let c = Vector3::from(c);
     let mut halves = [Vec::with_capacity(inliers.len()), Vec::with_capacity(inliers.len())];
     for p in &inliers {
         let below = (Vector3::from(v(p)) - c).dot(&across) < 0.0;
