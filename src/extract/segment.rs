@@ -267,9 +267,9 @@ fn plane_row_portable(
         let mut nearest = [f64::INFINITY; CELL_PX];
         let mut label = [0u32; CELL_PX];
         for &l in nearby.around(c * CELL_PX, v) {
-            let [a, b, c, d] = planes[l as usize - 1];
+            let [nx, ny, nz, offset] = planes[l as usize - 1];
             for ((p, nearest), label) in points.iter().zip(&mut nearest).zip(&mut label) {
-                let e = (a * p[0] as f64 + b * p[1] as f64 + c * p[2] as f64 + d).abs();
+                let e = (nx * p[0] as f64 + ny * p[1] as f64 + nz * p[2] as f64 + offset).abs();
                 let take = (e < dist) & (e < *nearest);
                 *nearest = if take { e } else { *nearest };
                 *label = if take { l } else { *label };
