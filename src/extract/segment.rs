@@ -295,12 +295,15 @@ fn join_waves(labels: &mut Grid<u32>, planes: &Grid<u32>, waves: u32) {
     for _ in 0..waves {
         let (mut changed, mut waiting) = (false, None);
         for v in 0..h {
-            let joined = open[v].then(|| {
-                let (still_open, took) = join_row(labels, planes, v, &mut new[v % 2]);
-                open[v] = still_open;
-                changed |= took;
-                v
-            });
+            // A row that took nothing is as it was: only one that took is written back.
+            let joined = open[v]
+                .then(|| {
+                    let (still_open, took) = join_row(labels, planes, v, &mut new[v % 2]);
+                    open[v] = still_open;
+                    changed |= took;
+                    took.then_some(v)
+                })
+                .flatten();
             if let Some(u) = std::mem::replace(&mut waiting, joined) {
                 labels.data[row(u)].copy_from_slice(&new[u % 2]);
             }
