@@ -58,11 +58,11 @@ pub fn diffuse(depth: &Grid<f32>, time: f32, steps: u32, kappa: f32) -> Grid<f32
     let inv_kappa = 1.0 / kappa;
     // The column pass cannot write where it reads (other stripes still read those rows):
     // it writes this second image, and the two swap.
-    let mut next = u.clone();
+    let mut next = Vec::new();
     for _ in 0..steps {
         solve_rows(&mut u, step, inv_kappa);
         solve_columns(&u, &mut next, step, inv_kappa);
-        std::mem::swap(&mut u, &mut next);
+        std::mem::swap(&mut u.data, &mut next);
     }
     u
 }
@@ -175,11 +175,14 @@ unsafe fn transpose_tile(src: *const f32, src_stride: usize, dst: *mut f32, dst_
     }
 }
 
-/// The column pass from `u` into `next` (same size, non-empty): stripes of LANES
-/// columns, read where they lie, each written by the task that solved it.
-fn solve_columns(u: &Grid<f32>, next: &mut Grid<f32>, step: f32, inv_kappa: f32) {
+/// The column pass from `u` (non-empty) into `next`'s values, whatever they were: stripes
+/// of LANES columns, read where they lie, each written by the task that solved it. Every
+/// value is written, so none is set beforehand.
+fn solve_columns(u: &Grid<f32>, next: &mut Vec<f32>, step: f32, inv_kappa: f32) {
     let (w, h) = (u.width, u.height);
-    let dst = StripeWriter(next.data.as_mut_ptr());
+    next.clear();
+    next.reserve(w * h);
+    let dst = StripeWriter(next.as_mut_ptr());
     (0..w.div_ceil(LANES)).into_par_iter().for_each(|k| {
         let x0 = k * LANES;
         let lanes = LANES.min(w - x0);
@@ -187,13 +190,15 @@ fn solve_columns(u: &Grid<f32>, next: &mut Grid<f32>, step: f32, inv_kappa: f32)
             solve_down(&u.data[x0..], w, lanes, step, inv_kappa, e, out);
             for (y, change) in out.chunks_exact(lanes).enumerate() {
                 let at = y * w + x0;
-                // SAFETY: `next` holds w * h values and outlives the pass; this task alone
-                // writes columns x0..x0 + lanes (the stripes are disjoint), and nothing
-                // reads `next` until the pass is over.
+                // SAFETY: `next` has room for w * h values and outlives the pass; this task
+                // alone writes columns x0..x0 + lanes (the stripes are disjoint), and
+                // nothing reads `next` until the pass is over.
                 unsafe { dst.write_sum(at, change, &u.data[at..at + lanes]) };
             }
         })
     });
+    // SAFETY: the stripes cover every column of every row, so all w * h values are written.
+    unsafe { next.set_len(w * h) };
 }
 
 /// The pointer through which the column pass's tasks write their own stripes of one image.
@@ -211,7 +216,7 @@ impl StripeWriter {
     unsafe fn write_sum(&self, at: usize, change: &[f32], depth: &[f32]) {
         for (k, (&c, &z)) in change.iter().zip(depth).enumerate() {
             // SAFETY: as the caller promises.
-            unsafe { *self.0.add(at + k) = c + z };
+            unsafe { self.0.add(at + k).write(c + z) };
         }
     }
 }
