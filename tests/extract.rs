@@ -654,6 +654,26 @@ fn bench_runs_the_cpu_stages_on_the_threads_and_vectors_it_is_given() {
 }
 
 #[test]
+fn a_frame_is_the_same_on_any_number_of_threads() {
+    use polymap::config::Backend;
+    use polymap::extract::Extractor;
+    let (depth, i, _, _) = frame(SceneKind::Straight, 320, 20, 2.0);
+    let cfg = PipelineConfig { backend: Backend::Cpu, ..PipelineConfig::default() };
+    // Three frames in a row on a pool of `threads`: a frame keeps the pool's other workers
+    // busy until it ends, and must let them go (or the next frame never starts).
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let mut extractor = Extractor::new(&cfg).unwrap();
+        (0..3).map(|_| pool.install(|| extractor.extract(&depth, &i).unwrap().0)).collect::<Vec<_>>()
+    };
+    let one = run(1);
+    assert!(one[0].polygons.len() >= 3, "{} polygons", one[0].polygons.len());
+    for threads in [2, 3, 4] {
+        assert_eq!(run(threads), one, "{threads} threads");
+    }
+}
+
+#[test]
 fn pieces_of_one_plane_cut_apart_by_dropouts_are_joined_into_one_region_and_nothing_else_is() {
     use polymap::grid::label_components;
     // A 160 x 12 strip of a tread seen from 1.2 m (the nearest tread, cut by the image's

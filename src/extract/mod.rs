@@ -17,6 +17,7 @@ pub mod segment;
 pub mod trim;
 pub mod uncertainty;
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use serde::Serialize;
@@ -170,7 +171,16 @@ impl Extractor {
         // twin's stages, and regions, fits and polygons after the GPU's) then starts where
         // it is called, instead of each one waking a worker and putting this thread to
         // sleep (dozens of hand-offs a frame, 40 % of a one-thread CPU frame).
-        rayon::scope(|_| self.extract_on_pool(frame, intr))
+        let frame_over = AtomicBool::new(false);
+        rayon::scope(|s| {
+            let home = rayon::current_thread_index();
+            for _ in 1..rayon::current_num_threads() {
+                let over = &frame_over;
+                s.spawn(move |_| take_work_until(over, home));
+            }
+            let _over = SetOnDrop(&frame_over);
+            self.extract_on_pool(frame, intr)
+        })
     }
 
     fn extract_on_pool(
@@ -205,6 +215,31 @@ impl Extractor {
             Engine::Gpu(gpu) => Twin::Gpu(gpu),
         };
         extract_with(twin, frame, intr, &self.cfg, keep)
+    }
+}
+
+/// Runs the pool's pending work until `over` is set, on a worker other than `home` (the
+/// frame's own, which returns at once: it would wait for itself), yielding the core to
+/// other threads whenever none is pending. The other workers so stay awake for the whole
+/// frame: between two parallel loops they fell asleep, and waking one (34 times a frame)
+/// took longer than most of the frame's loops; a two-thread frame in 0.84-0.86x.
+fn take_work_until(over: &AtomicBool, home: Option<usize>) {
+    if rayon::current_thread_index() == home {
+        return;
+    }
+    while !over.load(Ordering::Acquire) {
+        if rayon::yield_now() != Some(rayon::Yield::Executed) {
+            std::thread::yield_now();
+        }
+    }
+}
+
+/// Sets its flag when dropped, however the scope it guards ends.
+struct SetOnDrop<'a>(&'a AtomicBool);
+
+impl Drop for SetOnDrop<'_> {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Release);
     }
 }
 
