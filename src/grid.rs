@@ -11,6 +11,36 @@ pub struct Grid<T> {
     pub data: Vec<T>,
 }
 
+/// `rows` rows of `row_len` values, row v set to `init` and then handed to `fill(v, row)`,
+/// the rows in parallel tasks of at least `min_rows`. A task sets its own rows, while
+/// they are in its core's cache: `vec![init; n]` before the loop was a pass of its own
+/// over the whole image, on one thread.
+pub fn par_rows<T: Copy + Send + Sync>(
+    row_len: usize,
+    rows: usize,
+    init: T,
+    min_rows: usize,
+    fill: impl Fn(usize, &mut [T]) + Send + Sync,
+) -> Vec<T> {
+    use rayon::prelude::*;
+    let n = row_len * rows;
+    let mut data: Vec<T> = Vec::with_capacity(n);
+    if row_len > 0 {
+        let tasks = data.spare_capacity_mut()[..n].par_chunks_mut(row_len).enumerate().with_min_len(min_rows);
+        tasks.for_each(|(v, row)| {
+            for x in row.iter_mut() {
+                x.write(init);
+            }
+            // SAFETY: every value of the row was just written, and MaybeUninit<T> has T's layout.
+            let row = unsafe { &mut *(row as *mut [std::mem::MaybeUninit<T>] as *mut [T]) };
+            fill(v, row);
+        });
+    }
+    // SAFETY: the tasks above wrote all n values (none when row_len is 0, and then n is 0).
+    unsafe { data.set_len(n) };
+    data
+}
+
 /// A stretch of consecutive pixels along row `v`: indices `first..=last`, the row
 /// starting at index `row_start`.
 #[derive(Clone, Copy, Debug, PartialEq)]

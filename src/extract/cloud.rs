@@ -4,9 +4,8 @@
 
 use std::ops::Range;
 
-use rayon::prelude::*;
-
 use super::Grid;
+use crate::grid::par_rows;
 use crate::types::Intrinsics;
 
 pub struct Cloud {
@@ -20,15 +19,12 @@ impl Cloud {
     pub fn new(depth: &Grid<f32>, intr: &Intrinsics) -> Cloud {
         let w = depth.width;
         let ray_x: Vec<f32> = (0..w).map(|u| ((u as f64 - intr.cx) / intr.fx) as f32).collect();
-        let mut points = vec![[0.0f32; 3]; depth.data.len()];
-        if w > 0 {
-            points.par_chunks_mut(w).zip(depth.data.par_chunks(w)).enumerate().for_each(|(v, (row, z))| {
-                let ray_y = ((v as f64 - intr.cy) / intr.fy) as f32;
-                for ((p, &z), &x) in row.iter_mut().zip(z).zip(&ray_x) {
-                    *p = [x * z, ray_y * z, z];
-                }
-            });
-        }
+        let points = par_rows(w, depth.height, [0.0f32; 3], 1, |v, row| {
+            let ray_y = ((v as f64 - intr.cy) / intr.fy) as f32;
+            for ((p, &z), &x) in row.iter_mut().zip(&depth.data[v * w..(v + 1) * w]).zip(&ray_x) {
+                *p = [x * z, ray_y * z, z];
+            }
+        });
         Cloud { width: w, points }
     }
 

@@ -14,12 +14,11 @@
 use std::ops::Range;
 
 use nalgebra::Vector3;
-use rayon::prelude::*;
 
 use super::Grid;
 use super::cloud::{Cloud, has_depth};
 use super::cpu::ransac::{PlaneFit, PointBatch, refit};
-use crate::grid::{component_runs, first_other, flood, for_each_set, leading, runs};
+use crate::grid::{component_runs, first_other, flood, for_each_set, leading, par_rows, runs};
 
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
 #[derive(Clone, Debug)]
@@ -223,13 +222,10 @@ fn plane_image(
     // Label l's plane (normal, offset) at l - 1; NaN for none, within no distance.
     let planes: Vec<[f64; 4]> =
         fits.iter().map(|f| f.map_or([f64::NAN; 4], |f| [f.normal.x, f.normal.y, f.normal.z, f.offset])).collect();
-    let mut data = vec![0u32; labels.data.len()];
-    if w > 0 {
-        data.par_chunks_mut(w).enumerate().with_min_len(8).for_each(|(v, out)| {
-            let (held, points) = (&labels.data[v * w..(v + 1) * w], cloud.points(v * w..(v + 1) * w));
-            plane_row(nearby, &planes, points, held, v, dist as f64, out);
-        });
-    }
+    let data = par_rows(w, labels.height, 0u32, 8, |v, out| {
+        let (held, points) = (&labels.data[v * w..(v + 1) * w], cloud.points(v * w..(v + 1) * w));
+        plane_row(nearby, &planes, points, held, v, dist as f64, out);
+    });
     Grid { width: w, height: labels.height, data }
 }
 

@@ -3,13 +3,11 @@
 //! without a normal sealed to them, and every line pixel grown into its 4-neighbours. The fast loops work on whole rows; `boundary_oracle` runs the shaders'
 //! passes pixel by pixel, one function per entry point.
 
-use rayon::prelude::*;
-
 use super::ROWS_PER_TASK;
 use super::morphology::{close, closing_passes, morphology_at};
 use super::normals::NormalPlanes;
 use crate::extract::gpu::BoundaryParams;
-use crate::grid::Grid;
+use crate::grid::{Grid, par_rows};
 
 /// 1 where the pixel cannot be inside a planar region: the closed edge lines (Canny,
 /// and depth steps to a 4-neighbour larger than `ratio` times the depth), or no normal.
@@ -28,8 +26,7 @@ pub fn boundary(
     seal: u32,
 ) -> Grid<u8> {
     let (w, h) = (depth.width, depth.height);
-    let mut lines = vec![0u8; w * h];
-    lines.par_chunks_mut(w).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, out)| {
+    let lines = par_rows(w, h, 0u8, ROWS_PER_TASK, |v, out| {
         let row = |v: usize| &depth.data[v * w..(v + 1) * w];
         let (above, below) = ((v > 0).then(|| row(v - 1)), (v + 1 < h).then(|| row(v + 1)));
         depth_steps(row(v), above.unwrap_or(&[]), below.unwrap_or(&[]), out, ratio);
@@ -37,8 +34,7 @@ pub fn boundary(
     });
     let closed = close(&Grid { width: w, height: h, data: lines }, closing);
     // The normals' validity plane, a row at a time: 0 where the pixel has no normal.
-    let mut with_holes = vec![0u8; w * h];
-    with_holes.par_chunks_mut(w.max(1)).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, out)| {
+    let with_holes = par_rows(w, h, 0u8, ROWS_PER_TASK, |v, out| {
         let valid = &normals.data[(4 * v + 3) * w..(4 * v + 4) * w];
         for ((o, &l), &ok) in out.iter_mut().zip(&closed.data[v * w..(v + 1) * w]).zip(valid) {
             *o = u8::from((l != 0) | (ok == 0.0));
@@ -49,8 +45,7 @@ pub fn boundary(
     // Regions are 8-connected (as contour tracing sees them), so a thin diagonal line
     // would leak: growing each line pixel into its 4-neighbours (a plus-shaped dilation,
     // in whole rows) seals it.
-    let mut out = vec![0u8; w * h];
-    out.par_chunks_mut(w).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, row)| {
+    let out = par_rows(w, h, 0u8, ROWS_PER_TASK, |v, row| {
         let line = |v: usize| &closed.data[v * w..(v + 1) * w];
         row.copy_from_slice(line(v));
         for (o, &left) in row[1..].iter_mut().zip(line(v)) {

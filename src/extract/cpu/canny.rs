@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use super::components::hysteresis;
 use super::normals::NormalPlanes;
 use super::{ROWS_PER_TASK, widest_simd};
-use crate::grid::Grid;
+use crate::grid::{Grid, par_rows};
 
 /// The gradient of the normal field as shaders/gradient.wgsl writes it: a plane of
 /// magnitudes and one of NMS sectors (0..4; 4 marks a pixel whose 3x3 neighbourhood lacks
@@ -159,8 +159,7 @@ pub fn canny(grad: &Gradient, low: f32, high: f32) -> Grid<u8> {
 /// Non-maximum suppression and the double threshold: 0 none, 1 weak, 2 strong per pixel.
 pub fn classify(grad: &Gradient, low: f32, high: f32) -> Grid<u8> {
     let (w, h) = (grad.magnitude.width, grad.magnitude.height);
-    let mut class = vec![0u8; w * h];
-    class.par_chunks_mut(w.max(1)).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, out)| {
+    let class = par_rows(w, h, 0u8, ROWS_PER_TASK, |v, out| {
         if w >= 3 && v >= 1 && v + 1 < h {
             let m = &grad.magnitude.data[(v - 1) * w..(v + 2) * w];
             suppress_row(m, &grad.sector.data[v * w..(v + 1) * w], low, high, out);

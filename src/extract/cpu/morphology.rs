@@ -5,7 +5,7 @@
 use rayon::prelude::*;
 
 use crate::extract::gpu::MorphologyParams;
-use crate::grid::Grid;
+use crate::grid::{Grid, par_rows};
 
 /// Morphological close (dilate, then erode) with a `size` x `size` square; outside the
 /// image counts as edge, so closing never eats into the border.
@@ -38,8 +38,7 @@ fn square<const ALL: bool>(mask: &Grid<u8>, r: usize, outside: u8) -> Grid<u8> {
             }
         },
     );
-    let mut data = vec![identity; w * h];
-    data.par_chunks_mut(w).enumerate().with_min_len(16).for_each(|(v, out)| {
+    let data = par_rows(w, h, identity, 16, |v, out| {
         if v < r || v + r >= h {
             out.iter_mut().for_each(|o| combine(o, outside));
         }

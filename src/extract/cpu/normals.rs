@@ -11,6 +11,7 @@ use rayon::prelude::*;
 
 use super::{ROWS_PER_TASK, morphology, separable};
 use crate::extract::Grid;
+use crate::grid::par_rows;
 use crate::types::Intrinsics;
 
 /// Separable Sobel weights (smoothing, derivative) and the derivative's response to a
@@ -81,8 +82,7 @@ pub fn normal_planes(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32) -> Norma
     // invalid pixels dilated by the kernel's square, the outside counting as invalid.
     let invalid = Grid { width: w, height: h, data: z.iter().map(|&z| u8::from(z == 0.0)).collect() };
     let spoiled = morphology::dilate(&invalid, r, 1);
-    let mut planes = vec![0.0f32; 4 * w * h];
-    planes.par_chunks_mut(4 * w).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, planes)| {
+    let planes = par_rows(4 * w, h, 0.0f32, ROWS_PER_TASK, |v, planes| {
         let row = v * w..(v + 1) * w;
         let camera = [fx, fy, cx, cy, norm, v as f32];
         normals_row(&z[row.clone()], &zu[row.clone()], &zv[row.clone()], &spoiled.data[row], planes, camera);

@@ -3,29 +3,25 @@
 //! contiguous memory and vectorise. The GPU twins sum the same taps in one 2-D loop;
 //! the results agree to float rounding.
 
-use rayon::prelude::*;
-
 use super::{ROWS_PER_TASK, widest_simd};
+use crate::grid::par_rows;
 
 /// Σ_j along_v[j] Σ_i along_u[i] ch(u + i - r, v + j - r) for every pixel at least r
 /// from the border (r = half the kernel length); 0 within r of it.
 pub fn filter(ch: &[f32], w: usize, h: usize, along_u: &[f32], along_v: &[f32]) -> Vec<f32> {
     assert_eq!(along_u.len(), along_v.len(), "kernels of one filter have one length");
     let r = along_u.len() / 2;
-    let mut rows = vec![0.0f32; w * h];
     if w <= 2 * r || h <= 2 * r {
-        return rows;
+        return vec![0.0; w * h];
     }
-    rows.par_chunks_mut(w).zip(ch.par_chunks(w)).with_min_len(ROWS_PER_TASK).for_each(|(out, src)| {
-        row_pass(src, &mut out[r..w - r], along_u);
+    let rows = par_rows(w, h, 0.0f32, ROWS_PER_TASK, |v, out| {
+        row_pass(&ch[v * w..(v + 1) * w], &mut out[r..w - r], along_u);
     });
-    let mut out = vec![0.0f32; w * h];
-    out.par_chunks_mut(w).enumerate().with_min_len(ROWS_PER_TASK).for_each(|(v, dst)| {
+    par_rows(w, h, 0.0f32, ROWS_PER_TASK, |v, dst| {
         if v >= r && v + r < h {
             column_pass(&rows[(v - r) * w..(v + r + 1) * w], &mut dst[r..w - r], w, r, along_v);
         }
-    });
-    out
+    })
 }
 
 widest_simd! {
