@@ -71,6 +71,21 @@ pub fn diffuse(depth: &Grid<f32>, time: f32, steps: u32, kappa: f32) -> Grid<f32
 /// times over, few enough that a 320-wide image still splits into tasks for threads.
 const LANES: usize = 64;
 
+/// How many lines a task solves side by side, of `lines` in all: LANES, or 32 or 16 where
+/// that spreads them more evenly over the pool's threads. Modelled as rounds of one task
+/// per thread, a round as long as its widest task: 320 columns are 5 tasks of 64 (rounds
+/// of 64, 64 and 64 on two threads, one idle in the last) or 10 of 32 (5 rounds of 32);
+/// two threads' diffusion at 320x240 in 0.8x. On one thread every choice costs the same,
+/// and LANES stays. The bits do not depend on it: each line is solved on its own.
+fn lanes_for(lines: usize) -> usize {
+    let threads = rayon::current_num_threads();
+    let cost = |lanes: usize| {
+        let widths: Vec<usize> = (0..lines).step_by(lanes).map(|start| lanes.min(lines - start)).collect();
+        widths.chunks(threads).map(|round| round.iter().max().copied().unwrap_or(0)).sum::<usize>()
+    };
+    [32, 16].into_iter().fold(LANES, |best, lanes| if cost(lanes) < cost(best) { lanes } else { best })
+}
+
 thread_local! {
     /// A pass's working arrays (the transposed band, the elimination's factors, the
     /// changes), kept by each thread from frame to frame: allocating and zeroing them
@@ -91,11 +106,11 @@ fn with_scratch<R>(len: usize, f: impl FnOnce(&mut [f32], &mut [f32], &mut [f32]
     })
 }
 
-/// The row pass, in place (on a non-empty image). Rows are solved LANES at a time: each
+/// The row pass, in place (on a non-empty image). Rows are solved `lanes_for` at a time: each
 /// band is transposed so its rows run down a block and its pixels of one column lie side by side.
 fn solve_rows(u: &mut Grid<f32>, step: f32, inv_kappa: f32) {
     let w = u.width;
-    u.data.par_chunks_mut(w * LANES).for_each(|band| {
+    u.data.par_chunks_mut(w * lanes_for(u.height)).for_each(|band| {
         let lanes = band.len() / w;
         with_scratch(w * lanes, |block, e, out| {
             transpose(band, lanes, w, block);
@@ -176,16 +191,17 @@ unsafe fn transpose_tile(src: *const f32, src_stride: usize, dst: *mut f32, dst_
 }
 
 /// The column pass from `u` (non-empty) into `next`'s values, whatever they were: stripes
-/// of LANES columns, read where they lie, each written by the task that solved it. Every
+/// of `lanes_for` columns, read where they lie, each written by the task that solved it. Every
 /// value is written, so none is set beforehand.
 fn solve_columns(u: &Grid<f32>, next: &mut Vec<f32>, step: f32, inv_kappa: f32) {
     let (w, h) = (u.width, u.height);
     next.clear();
     next.reserve(w * h);
     let dst = StripeWriter(next.as_mut_ptr());
-    (0..w.div_ceil(LANES)).into_par_iter().for_each(|k| {
-        let x0 = k * LANES;
-        let lanes = LANES.min(w - x0);
+    let stripe = lanes_for(w);
+    (0..w.div_ceil(stripe)).into_par_iter().for_each(|k| {
+        let x0 = k * stripe;
+        let lanes = stripe.min(w - x0);
         with_scratch(h * lanes, |_, e, out| {
             solve_down(&u.data[x0..], w, lanes, step, inv_kappa, e, out);
             for (y, change) in out.chunks_exact(lanes).enumerate() {
@@ -378,12 +394,28 @@ mod tests {
                     solve_line(&mut oracle, u, w, h, step, 1.0 / kappa);
                 }
             }
-            let fast = diffuse(&depth, time, steps, kappa);
-            for i in 0..w * h {
-                assert_eq!(fast.data[i].to_bits(), oracle[i].to_bits(), "{w}x{h}, {steps} steps, pixel {i}");
+            // On pools of 1, 2 and 16 threads: bands and stripes of 64, 32 and 16 lines.
+            for threads in [1, 2, 16] {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                let fast = pool.install(|| diffuse(&depth, time, steps, kappa));
+                for i in 0..w * h {
+                    let bits = (fast.data[i].to_bits(), oracle[i].to_bits());
+                    assert_eq!(bits.0, bits.1, "{w}x{h}, {steps} steps, {threads} threads, pixel {i}");
+                }
             }
             assert_ne!(oracle, depth.data, "the steps moved the depth");
         }
+    }
+
+    #[test]
+    fn lines_split_into_tasks_that_even_out_the_threads() {
+        let on = |threads: usize, lines: usize| {
+            rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| lanes_for(lines))
+        };
+        // One thread: always the widest. Two: 320 columns as 10 tasks of 32, not 5 of 64;
+        // 640 and 240 split evenly at 64 already. Sixteen: 640 columns as 40 tasks of 16.
+        assert!((1..700).all(|lines| on(1, lines) == LANES));
+        assert_eq!([on(2, 320), on(2, 640), on(2, 240), on(16, 640)], [32, LANES, LANES, 16]);
     }
 
     #[test]
