@@ -296,12 +296,17 @@ pub fn extract_with(
     let mut lap = stopwatch();
     let depth = depth_metres(frame, intr)?;
     times.upload = lap();
-    let (images, seg, mut gpu) = match twin {
+    let (images, seg, cloud, mut gpu) = match twin {
         Twin::Cpu => {
             let images = cpu::image_stages(&depth, intr, cfg, &mut times, &mut lap);
-            let seg = Segmentation::components(&images.boundary, MIN_REGION_PIXELS);
+            // The cloud needs only the depth: it is built beside the components, which
+            // one thread labels (timed with them).
+            let (seg, cloud) = rayon::join(
+                || Segmentation::components(&images.boundary, MIN_REGION_PIXELS),
+                || Cloud::new(&depth, intr),
+            );
             times.regions = lap();
-            (Some(images), seg, None)
+            (Some(images), seg, cloud, None)
         }
         Twin::Gpu(gpu) => {
             let out = gpu.image_stages(&depth, intr, cfg, keep_images)?;
@@ -314,7 +319,7 @@ pub fn extract_with(
             [times.diffusion, times.normals, times.edges, times.regions] = [t.diffusion, t.normals, t.edges, t.regions];
             times.upload += t.upload;
             times.readback = (ms - t.upload - t.diffusion - t.normals - t.edges - t.regions).max(0.0);
-            (out.images, seg, Some(gpu))
+            (out.images, seg, Cloud::new(&depth, intr), Some(gpu))
         }
     };
     let (hyp, dist) = (cfg.ransac_hypotheses, cfg.ransac_inlier_distance_m as f32);
@@ -322,7 +327,6 @@ pub fn extract_with(
         None => Ok(cpu::ransac::fit_planes(batch, hyp, dist)),
         Some(gpu) => Ok(cpu::ransac::fits_from_scores(batch, &gpu.score_hypotheses(batch, hyp, dist)?, hyp, dist)),
     };
-    let cloud = Cloud::new(&depth, intr);
     let (seg, regions, fits, creases) = segment_and_fit(seg, &cloud, cfg, fit, &mut times, &mut lap)?;
     let polygons = build_polygons(&regions, &fits, &seg, &creases, &depth, intr, cfg);
     times.polygons = lap();
