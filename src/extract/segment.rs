@@ -14,6 +14,7 @@
 use std::ops::Range;
 
 use nalgebra::Vector3;
+use rayon::prelude::*;
 
 use super::Grid;
 use super::cloud::{Cloud, has_depth};
@@ -279,56 +280,93 @@ fn plane_row_portable(
 
 /// Growth's waves, each a sweep of the rows that still have a pixel to take: an unlabelled
 /// pixel takes its plane's label (`planes`, 0 for none) when a 4-neighbour had that label
-/// after the wave before. A row's new labels are written back once the row below has read
-/// the old ones; the sweeps stop early once a wave takes nothing.
+/// after the wave before. The rows are swept in blocks, one task each (`sweep_block`); a
+/// block reads its neighbours' edge rows from copies taken before the wave. The sweeps stop
+/// early once a wave takes nothing.
 fn join_waves(labels: &mut Grid<u32>, planes: &Grid<u32>, waves: u32) {
     let (w, h) = (labels.width, labels.height);
+    if w == 0 || h == 0 {
+        return;
+    }
     let row = |v: usize| v * w..(v + 1) * w;
     let mut open: Vec<bool> = (0..h)
         .map(|v| labels.data[row(v)].iter().zip(&planes.data[row(v)]).any(|(&l, &p)| (l == 0) & (p != 0)))
         .collect();
-    let mut new = [vec![0u32; w], vec![0u32; w]];
+    // A block for each thread: a sweep is a few tens of microseconds, one thread's alone.
+    let block = h.div_ceil(rayon::current_num_threads()).max(MIN_BLOCK_ROWS);
+    let blocks = h.div_ceil(block);
+    // Block k's first row at 2k, its last at 2k + 1.
+    let mut edges = vec![0u32; 2 * blocks * w];
     for _ in 0..waves {
-        let (mut changed, mut waiting) = (false, None);
-        for v in 0..h {
-            // A row that took nothing is as it was: only one that took is written back.
-            let joined = open[v]
-                .then(|| {
-                    let (still_open, took) = join_row(labels, planes, v, &mut new[v % 2]);
-                    open[v] = still_open;
-                    changed |= took;
-                    took.then_some(v)
-                })
-                .flatten();
-            if let Some(u) = std::mem::replace(&mut waiting, joined) {
-                labels.data[row(u)].copy_from_slice(&new[u % 2]);
+        if blocks > 1 {
+            for (k, pair) in edges.chunks_mut(2 * w).enumerate() {
+                let (first, last) = (k * block, ((k + 1) * block).min(h) - 1);
+                pair[..w].copy_from_slice(&labels.data[row(first)]);
+                pair[w..].copy_from_slice(&labels.data[row(last)]);
             }
         }
-        if let Some(u) = waiting {
-            labels.data[row(u)].copy_from_slice(&new[u % 2]);
-        }
+        let edges = &edges;
+        let tasks = labels.data.par_chunks_mut(block * w).zip(open.par_chunks_mut(block)).enumerate();
+        let changed = tasks
+            .map(|(k, (rows, open))| {
+                let above = (k > 0).then(|| &edges[(2 * k - 1) * w..2 * k * w]);
+                let below = (k + 1 < blocks).then(|| &edges[2 * (k + 1) * w..(2 * k + 3) * w]);
+                sweep_block(rows, open, &planes.data[k * block * w..], w, [above, below])
+            })
+            .reduce(|| false, |a, b| a | b);
         if !changed {
             break;
         }
     }
 }
 
+/// The fewest rows a block of `join_waves` has.
+const MIN_BLOCK_ROWS: usize = 16;
+
+/// One wave over a block of rows (`planes` from the block's first row on), reading the
+/// rows `outside` it above and below (None at the image's edge) as the wave found them.
+/// A row's new labels are written back once the row below has read the old ones; only a
+/// row that took a pixel is written. Whether one did.
+fn sweep_block(rows: &mut [u32], open: &mut [bool], planes: &[u32], w: usize, outside: [Option<&[u32]>; 2]) -> bool {
+    let h = rows.len() / w;
+    let mut new = [vec![0u32; w], vec![0u32; w]];
+    let (mut changed, mut waiting) = (false, None);
+    for v in 0..h {
+        let joined = open[v]
+            .then(|| {
+                let row = &rows[v * w..(v + 1) * w];
+                // The row itself stands in beyond the image (see `join_row_portable`).
+                let above = if v > 0 { &rows[(v - 1) * w..v * w] } else { outside[0].unwrap_or(row) };
+                let below = if v + 1 < h { &rows[(v + 1) * w..(v + 2) * w] } else { outside[1].unwrap_or(row) };
+                let (still_open, took) = join_row([above, row, below], &planes[v * w..(v + 1) * w], &mut new[v % 2]);
+                open[v] = still_open;
+                changed |= took;
+                took.then_some(v)
+            })
+            .flatten();
+        if let Some(u) = std::mem::replace(&mut waiting, joined) {
+            rows[u * w..(u + 1) * w].copy_from_slice(&new[u % 2]);
+        }
+    }
+    if let Some(u) = waiting {
+        rows[u * w..(u + 1) * w].copy_from_slice(&new[u % 2]);
+    }
+    changed
+}
+
 crate::extract::cpu::widest_simd! {
-    /// One wave on row v into `out`: (whether a pixel of the row may still join, whether one did).
-    fn join_row(labels: &Grid<u32>, planes: &Grid<u32>, v: usize, out: &mut [u32]) -> (bool, bool) = join_row_portable
+    /// One wave on a row into `out`, given the labels of the rows above, at and below it and
+    /// the row's planes: (whether a pixel of the row may still join, whether one did).
+    fn join_row(labels: [&[u32]; 3], plane: &[u32], out: &mut [u32]) -> (bool, bool) = join_row_portable
 }
 
 /// Whole rows at a time, comparisons combined with `&` and `|`: the loops vectorise. A
 /// pixel's plane is never 0 where it joins, so a neighbour beyond the image (0, or the
 /// row itself standing in above and below: 0 at an unlabelled pixel) never matches.
 #[inline(always)]
-fn join_row_portable(labels: &Grid<u32>, planes: &Grid<u32>, v: usize, out: &mut [u32]) -> (bool, bool) {
-    let (w, h) = (labels.width, labels.height);
-    let row = &labels.data[v * w..(v + 1) * w];
-    let plane = &planes.data[v * w..(v + 1) * w];
-    let above = if v > 0 { &labels.data[(v - 1) * w..v * w] } else { row };
-    let below = if v + 1 < h { &labels.data[(v + 1) * w..(v + 2) * w] } else { row };
-    let out = &mut out[..w];
+fn join_row_portable([above, row, below]: [&[u32]; 3], plane: &[u32], out: &mut [u32]) -> (bool, bool) {
+    let w = row.len();
+    let (above, below, plane, out) = (&above[..w], &below[..w], &plane[..w], &mut out[..w]);
     for u in 0..w {
         let (x, p) = (row[u], plane[u]);
         out[u] = if (x == 0) & (p != 0) & ((above[u] == p) | (below[u] == p)) { p } else { x };
@@ -823,7 +861,16 @@ mod tests {
                 assert_eq!(seg.pixels.len(), 3);
                 let fits = super::super::cpu::ransac::fit_planes(&seg.points(&[0, 1, 2], &cloud), 32, 0.004);
                 let want = grow_by_sweeps(&seg, &fits, &cloud, dist, waves);
-                seg.grow(&fits, &[true; 3], &cloud, dist, waves);
+                // On 2 and 16 threads the waves sweep 2 and 5 blocks of rows.
+                for threads in [2, 16] {
+                    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                    let mut on_blocks = Segmentation::from_labels(labels.clone(), 3, 1);
+                    pool.install(|| on_blocks.grow(&fits, &[true; 3], &cloud, dist, waves));
+                    assert_eq!(on_blocks.labels.data, want, "{dist}, {waves} waves, {threads} threads");
+                }
+                rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(|| {
+                    seg.grow(&fits, &[true; 3], &cloud, dist, waves);
+                });
                 assert_eq!(seg.labels.data, want, "inlier distance {dist}, {waves} waves");
                 let grown = want.iter().zip(&labels.data).filter(|(a, b)| a != b).count();
                 let left = want.iter().zip(&depth.data).filter(|&(&l, &z)| l == 0 && z != 0.0).count();
@@ -945,7 +992,9 @@ mod tests {
             let (mut got, mut got_entries) = (vec![0u32; w * h], Vec::new());
             let mut mask = vec![0u8; w];
             for v in 0..h {
-                let (open, took) = join_row(&labels, &planes, v, &mut got[v * w..(v + 1) * w]);
+                let line = |v: usize| &labels.data[v * w..(v + 1) * w];
+                let around = [line(v.saturating_sub(1)), line(v), line((v + 1).min(h - 1))];
+                let (open, took) = join_row(around, &planes.data[v * w..(v + 1) * w], &mut got[v * w..(v + 1) * w]);
                 assert_eq!((open, took), (want_open[v], want_took[v]), "{w} x {h}, row {v}");
                 labelled_after_another(&labels, v, &mut mask);
                 for_each_set(&mask, |u| got_entries.push((u, v)));
