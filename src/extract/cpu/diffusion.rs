@@ -17,6 +17,8 @@
 //! either pixel is invalid), v solves v_i - k_{i-1} (v_{i-1} - v_i) - k_i (v_{i+1} - v_i) = u_i,
 //! written for the change v - u.
 
+use std::ops::Range;
+
 use rayon::prelude::*;
 
 use crate::extract::Grid;
@@ -107,85 +109,108 @@ fn with_scratch<R>(len: usize, f: impl FnOnce(&mut [f32], &mut [f32], &mut [f32]
 }
 
 /// The row pass, in place (on a non-empty image). Rows are solved `lanes_for` at a time: each
-/// band is transposed so its rows run down a block and its pixels of one column lie side by side.
+/// band is transposed so its rows run down a block and its pixels of one column lie side by
+/// side; the change and the depth are added as the result is transposed back.
 fn solve_rows(u: &mut Grid<f32>, step: f32, inv_kappa: f32) {
     let w = u.width;
     u.data.par_chunks_mut(w * lanes_for(u.height)).for_each(|band| {
         let lanes = band.len() / w;
         with_scratch(w * lanes, |block, e, out| {
-            transpose(band, lanes, w, block);
+            transpose(band, None, lanes, w, block);
             solve_down(block, lanes, lanes, step, inv_kappa, e, out);
-            out.iter_mut().zip(&*block).for_each(|(o, &z)| *o += z);
-            transpose(out, w, lanes, band);
+            transpose(out, Some(block), w, lanes, band);
         })
     });
 }
 
-/// `dst[c * rows + r] = src[r * cols + c]` (`src` is `rows` x `cols`, row-major). In 8 x 8
-/// tiles, each transposed in registers where the CPU has AVX2: element by element, the
-/// writes went a cache line apart each and the two transposes of a row pass cost two
-/// thirds of its solve.
-fn transpose(src: &[f32], rows: usize, cols: usize, dst: &mut [f32]) {
-    const T: usize = 8;
+/// `dst[c * rows + r] = src[r * cols + c]`, plus `plus[r * cols + c]` if given (`src` and
+/// `plus` are `rows` x `cols`, row-major). In 8 x 8 tiles transposed in registers where the
+/// CPU has AVX2: element by element, the writes went a cache line apart each and the two
+/// transposes of a row pass cost two thirds of its solve. The sum is the one a separate
+/// pass would add, in the same order (the same bits), without that pass.
+fn transpose(src: &[f32], plus: Option<&[f32]>, rows: usize, cols: usize, dst: &mut [f32]) {
     let (src, dst) = (&src[..rows * cols], &mut dst[..rows * cols]);
+    let plus = plus.map(|p| &p[..rows * cols]);
     #[cfg(target_arch = "x86_64")]
-    let avx2 = super::simd::level() >= super::simd::Level::Avx2;
-    for r0 in (0..rows).step_by(T) {
-        for c0 in (0..cols).step_by(T) {
-            #[cfg(target_arch = "x86_64")]
-            if avx2 && r0 + T <= rows && c0 + T <= cols {
-                // SAFETY: the CPU has AVX2; the tile's 8 rows of 8 lie within `src` (the
-                // last element read is (r0 + 7) * cols + c0 + 7 < rows * cols) and its
-                // 8 columns of 8 within `dst` likewise.
-                unsafe {
-                    transpose_tile(src.as_ptr().add(r0 * cols + c0), cols, dst.as_mut_ptr().add(c0 * rows + r0), rows)
-                };
-                continue;
-            }
-            for r in r0..(r0 + T).min(rows) {
-                for c in c0..(c0 + T).min(cols) {
-                    dst[c * rows + r] = src[r * cols + c];
-                }
-            }
+    if super::simd::level() >= super::simd::Level::Avx2 {
+        // SAFETY: the CPU has AVX2; the slices are rows * cols long.
+        return unsafe { transpose_avx2(src, plus, rows, cols, dst) };
+    }
+    transpose_part(src, plus, (0..rows, 0..cols), rows, cols, dst);
+}
+
+/// `transpose` of the given rows and columns only, element by element: the tiles at the
+/// edges, and everything without AVX2.
+fn transpose_part(
+    src: &[f32],
+    plus: Option<&[f32]>,
+    (part_rows, part_cols): (Range<usize>, Range<usize>),
+    rows: usize,
+    cols: usize,
+    dst: &mut [f32],
+) {
+    for r in part_rows {
+        for c in part_cols.clone() {
+            let i = r * cols + c;
+            dst[c * rows + r] = plus.map_or(src[i], |p| src[i] + p[i]);
         }
     }
 }
 
-/// The 8 x 8 floats from `src` (rows `src_stride` apart) transposed to `dst` (rows
-/// `dst_stride` apart): pairs interleaved, then quads, then the 128-bit halves swapped.
+/// The side of `transpose`'s tiles.
+const TILE: usize = 8;
+
+/// `transpose` on AVX2: each whole 8 x 8 tile in registers (pairs interleaved, then quads,
+/// then the 128-bit halves swapped), the tiles at the edges element by element.
 ///
 /// # Safety
-/// The CPU has AVX2, and the 8 rows of 8 at `src` and at `dst` are in bounds.
+/// The CPU has AVX2; `src`, `plus` and `dst` hold rows * cols values.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn transpose_tile(src: *const f32, src_stride: usize, dst: *mut f32, dst_stride: usize) {
+unsafe fn transpose_avx2(src: &[f32], plus: Option<&[f32]>, rows: usize, cols: usize, dst: &mut [f32]) {
     use std::arch::x86_64::*;
-    // SAFETY: in bounds, as the caller promises; loads and stores are unaligned ones.
-    unsafe {
-        let r: [__m256; 8] = std::array::from_fn(|k| _mm256_loadu_ps(src.add(k * src_stride)));
-        let t = [
-            _mm256_unpacklo_ps(r[0], r[1]),
-            _mm256_unpackhi_ps(r[0], r[1]),
-            _mm256_unpacklo_ps(r[2], r[3]),
-            _mm256_unpackhi_ps(r[2], r[3]),
-            _mm256_unpacklo_ps(r[4], r[5]),
-            _mm256_unpackhi_ps(r[4], r[5]),
-            _mm256_unpacklo_ps(r[6], r[7]),
-            _mm256_unpackhi_ps(r[6], r[7]),
-        ];
-        let q = [
-            _mm256_shuffle_ps::<0x44>(t[0], t[2]),
-            _mm256_shuffle_ps::<0xEE>(t[0], t[2]),
-            _mm256_shuffle_ps::<0x44>(t[1], t[3]),
-            _mm256_shuffle_ps::<0xEE>(t[1], t[3]),
-            _mm256_shuffle_ps::<0x44>(t[4], t[6]),
-            _mm256_shuffle_ps::<0xEE>(t[4], t[6]),
-            _mm256_shuffle_ps::<0x44>(t[5], t[7]),
-            _mm256_shuffle_ps::<0xEE>(t[5], t[7]),
-        ];
-        for k in 0..4 {
-            _mm256_storeu_ps(dst.add(k * dst_stride), _mm256_permute2f128_ps::<0x20>(q[k], q[k + 4]));
-            _mm256_storeu_ps(dst.add((k + 4) * dst_stride), _mm256_permute2f128_ps::<0x31>(q[k], q[k + 4]));
+    for r0 in (0..rows).step_by(TILE) {
+        for c0 in (0..cols).step_by(TILE) {
+            if r0 + TILE > rows || c0 + TILE > cols {
+                let part = (r0..rows.min(r0 + TILE), c0..cols.min(c0 + TILE));
+                transpose_part(src, plus, part, rows, cols, dst);
+                continue;
+            }
+            // SAFETY: the tile's 8 rows of 8 lie within `src` and `plus` (the last element read
+            // is (r0 + 7) * cols + c0 + 7 < rows * cols) and its 8 columns of 8 within `dst`;
+            // loads and stores are unaligned ones.
+            unsafe {
+                let at = |k: usize| (r0 + k) * cols + c0;
+                let r: [__m256; 8] = std::array::from_fn(|k| {
+                    let x = _mm256_loadu_ps(src.as_ptr().add(at(k)));
+                    plus.map_or(x, |p| _mm256_add_ps(x, _mm256_loadu_ps(p.as_ptr().add(at(k)))))
+                });
+                let t = [
+                    _mm256_unpacklo_ps(r[0], r[1]),
+                    _mm256_unpackhi_ps(r[0], r[1]),
+                    _mm256_unpacklo_ps(r[2], r[3]),
+                    _mm256_unpackhi_ps(r[2], r[3]),
+                    _mm256_unpacklo_ps(r[4], r[5]),
+                    _mm256_unpackhi_ps(r[4], r[5]),
+                    _mm256_unpacklo_ps(r[6], r[7]),
+                    _mm256_unpackhi_ps(r[6], r[7]),
+                ];
+                let q = [
+                    _mm256_shuffle_ps::<0x44>(t[0], t[2]),
+                    _mm256_shuffle_ps::<0xEE>(t[0], t[2]),
+                    _mm256_shuffle_ps::<0x44>(t[1], t[3]),
+                    _mm256_shuffle_ps::<0xEE>(t[1], t[3]),
+                    _mm256_shuffle_ps::<0x44>(t[4], t[6]),
+                    _mm256_shuffle_ps::<0xEE>(t[4], t[6]),
+                    _mm256_shuffle_ps::<0x44>(t[5], t[7]),
+                    _mm256_shuffle_ps::<0xEE>(t[5], t[7]),
+                ];
+                let out = dst.as_mut_ptr().add(c0 * rows + r0);
+                for k in 0..4 {
+                    _mm256_storeu_ps(out.add(k * rows), _mm256_permute2f128_ps::<0x20>(q[k], q[k + 4]));
+                    _mm256_storeu_ps(out.add((k + 4) * rows), _mm256_permute2f128_ps::<0x31>(q[k], q[k + 4]));
+                }
+            }
         }
     }
 }
@@ -423,10 +448,15 @@ mod tests {
         for (rows, cols) in [(8, 8), (64, 97), (2, 97), (17, 9), (1, 1)] {
             let src: Vec<f32> = (0..rows * cols).map(|i| i as f32).collect();
             let mut dst = vec![f32::NAN; rows * cols];
-            transpose(&src, rows, cols, &mut dst);
+            let plus: Vec<f32> = (0..rows * cols).map(|i| (i * 7 % 13) as f32 * 0.25).collect();
+            let mut summed = vec![f32::NAN; rows * cols];
+            transpose(&src, None, rows, cols, &mut dst);
+            transpose(&src, Some(&plus), rows, cols, &mut summed);
             for r in 0..rows {
                 for c in 0..cols {
-                    assert_eq!(dst[c * rows + r], src[r * cols + c], "{rows} x {cols}, ({r}, {c})");
+                    let i = r * cols + c;
+                    assert_eq!(dst[c * rows + r], src[i], "{rows} x {cols}, ({r}, {c})");
+                    assert_eq!(summed[c * rows + r], src[i] + plus[i], "{rows} x {cols}, ({r}, {c}), summed");
                 }
             }
         }
