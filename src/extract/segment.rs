@@ -466,9 +466,8 @@ impl Segmentation {
     fn steps_between(&self, cloud: &Cloud, ratio: f32, max_gap: usize) -> Vec<((u32, u32), u32)> {
         let (w, h) = (self.labels.width, self.labels.height);
         let l = &self.labels.data;
-        let mut steps: Vec<((u32, u32), u32)> = Vec::new();
         // From labelled pixel i to labelled pixel j, `px` pixels apart, nothing labelled between.
-        let mut step = |i: usize, j: usize, px: usize| {
+        let step = |steps: &mut Vec<((u32, u32), u32)>, i: usize, j: usize, px: usize| {
             let (a, b, zi, zj) = (l[i], l[j], cloud.depth(i), cloud.depth(j));
             if a != b && zi > 0.0 && zj > 0.0 && (zi - zj).abs() <= ratio * px as f32 * zi.min(zj) {
                 // Counted as they come where the pair repeats (along a border it mostly
@@ -485,18 +484,31 @@ impl Segmentation {
         let nearest = |j: usize, stride: usize, room: usize| {
             (1..=room.min(max_gap + 1)).map(|k| (j - k * stride, k)).find(|&(i, _)| l[i] != 0)
         };
-        let mut changes = vec![0u8; w];
-        for v in 0..h {
-            labelled_after_another(&self.labels, v, &mut changes);
-            for_each_set(&changes, |u| {
-                let j = v * w + u;
-                for (stride, room) in [(1, u), (w, v)] {
-                    if let Some((i, px)) = nearest(j, stride, room) {
-                        step(i, j, px);
-                    }
-                }
+        // Rows in blocks side by side, each with its own list: the counts are summed below
+        // whatever order they come in.
+        let mut steps: Vec<((u32, u32), u32)> = (0..h)
+            .into_par_iter()
+            .with_min_len(MIN_BLOCK_ROWS)
+            .fold(
+                || (Vec::new(), vec![0u8; w]),
+                |(mut steps, mut changes), v| {
+                    labelled_after_another(&self.labels, v, &mut changes);
+                    for_each_set(&changes, |u| {
+                        let j = v * w + u;
+                        for (stride, room) in [(1, u), (w, v)] {
+                            if let Some((i, px)) = nearest(j, stride, room) {
+                                step(&mut steps, i, j, px);
+                            }
+                        }
+                    });
+                    (steps, changes)
+                },
+            )
+            .map(|(steps, _)| steps)
+            .reduce(Vec::new, |mut a, b| {
+                a.extend(b);
+                a
             });
-        }
         steps.sort_unstable();
         let mut counted: Vec<((u32, u32), u32)> = Vec::new();
         for (pair, k) in steps {
