@@ -18,7 +18,7 @@ use rayon::prelude::*;
 
 use super::Grid;
 use super::cloud::{Cloud, has_depth};
-use super::cpu::ransac::{PlaneFit, PointBatch, refit};
+use super::cpu::ransac::{PlaneFit, PointBatch, refit, support};
 use crate::grid::{component_runs, first_other, flood, for_each_set, leading, par_rows, runs};
 
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
@@ -562,7 +562,7 @@ impl Segmentation {
             // Each piece on the joined plane, not just their sum: a large region would
             // otherwise swallow a small piece of a neighbouring surface within its outliers.
             let nb = pts.len() - na;
-            let on_plane = |pts: &[[f32; 3]]| pts.iter().filter(|p| joined.distance(p) < dist as f64).count();
+            let on_plane = |pts: &[[f32; 3]]| support(pts, joined.normal.into(), joined.offset, dist as f64).0;
             if on_plane(&pts[..na]) < (min_ratio * na as f64).ceil() as usize
                 || on_plane(&pts[na..]) < (min_ratio * nb as f64).ceil() as usize
             {

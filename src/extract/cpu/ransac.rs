@@ -222,8 +222,10 @@ fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 
     inlier_moments_scalar(points, n, d, dist, o)
 }
 
-/// The points within `dist` of (n, offset), and the sum of their squared distances.
-fn support(points: &[[f32; 3]], n: [f64; 3], offset: f64, dist: f64) -> (usize, f64) {
+/// The points within `dist` of (n, offset), and the sum of their squared distances. A point
+/// counts exactly where `PlaneFit::distance` puts it within `dist` of the plane (the same
+/// operations in the same order).
+pub fn support(points: &[[f32; 3]], n: [f64; 3], offset: f64, dist: f64) -> (usize, f64) {
     #[cfg(target_arch = "x86_64")]
     {
         use super::simd::Level;
@@ -591,6 +593,10 @@ mod tests {
                 let (count, want) =
                     (support(&points, nd, offset, dist as f64).0, support_scalar(&points, nd, offset, dist as f64).0);
                 assert_eq!(count, want, "size {size}: a point on the edge of the support");
+                // And the points a fit's `distance` puts within it (joins count them so).
+                let fit = PlaneFit { normal: Vector3::from(nd), offset, inliers: 0, points: size, rms: 0.0 };
+                let within = points.iter().filter(|p| fit.distance(p) < dist as f64).count();
+                assert_eq!(count, within, "size {size}: support is PlaneFit::distance's");
             }
             if size > 100 {
                 assert!(
