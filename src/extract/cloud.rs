@@ -21,9 +21,7 @@ impl Cloud {
         let ray_x: Vec<f32> = (0..w).map(|u| ((u as f64 - intr.cx) / intr.fx) as f32).collect();
         let points = par_rows(w, depth.height, [0.0f32; 3], 1, |v, row| {
             let ray_y = ((v as f64 - intr.cy) / intr.fy) as f32;
-            for ((p, &z), &x) in row.iter_mut().zip(&depth.data[v * w..(v + 1) * w]).zip(&ray_x) {
-                *p = [x * z, ray_y * z, z];
-            }
+            back_project_row(&depth.data[v * w..(v + 1) * w], &ray_x, ray_y, row);
         });
         Cloud { width: w, points }
     }
@@ -64,4 +62,16 @@ impl Cloud {
 #[inline(always)]
 pub fn has_depth(p: &[f32; 3]) -> bool {
     p[2] != 0.0
+}
+
+crate::extract::cpu::widest_simd! {
+    /// A row's points: depth z at a pixel whose ray is (x, y, 1) is (x z, y z, z).
+    fn back_project_row(z: &[f32], ray_x: &[f32], ray_y: f32, out: &mut [[f32; 3]]) = back_project_row_portable
+}
+
+#[inline(always)]
+fn back_project_row_portable(z: &[f32], ray_x: &[f32], ray_y: f32, out: &mut [[f32; 3]]) {
+    for ((p, &z), &x) in out.iter_mut().zip(z).zip(ray_x) {
+        *p = [x * z, ray_y * z, z];
+    }
 }
