@@ -320,7 +320,8 @@ fn join_waves(labels: &mut Grid<u32>, planes: &Grid<u32>, waves: u32) {
     }
 }
 
-/// The fewest rows a block of `join_waves` has.
+/// The fewest rows in a block of the row scans split over threads (`join_waves`,
+/// `steps_between`): fewer is too little work to hand to another thread.
 const MIN_BLOCK_ROWS: usize = 16;
 
 /// One wave over a block of rows (`planes` from the block's first row on), reading the

@@ -61,9 +61,11 @@ pub fn diffuse(depth: &Grid<f32>, time: f32, steps: u32, kappa: f32) -> Grid<f32
     // The column pass cannot write where it reads (other stripes still read those rows):
     // it writes this second image, and the two swap.
     let mut next = Vec::new();
+    // Lines a task: the same for every pass of one image on one pool.
+    let (rows_a_band, columns_a_stripe) = (lanes_for(u.height), lanes_for(u.width));
     for _ in 0..steps {
-        solve_rows(&mut u, step, inv_kappa);
-        solve_columns(&u, &mut next, step, inv_kappa);
+        solve_rows(&mut u, rows_a_band, step, inv_kappa);
+        solve_columns(&u, &mut next, columns_a_stripe, step, inv_kappa);
         std::mem::swap(&mut u.data, &mut next);
     }
     u
@@ -108,12 +110,12 @@ fn with_scratch<R>(len: usize, f: impl FnOnce(&mut [f32], &mut [f32], &mut [f32]
     })
 }
 
-/// The row pass, in place (on a non-empty image). Rows are solved `lanes_for` at a time: each
+/// The row pass, in place (on a non-empty image). Rows are solved `band_rows` at a time: each
 /// band is transposed so its rows run down a block and its pixels of one column lie side by
 /// side; the change and the depth are added as the result is transposed back.
-fn solve_rows(u: &mut Grid<f32>, step: f32, inv_kappa: f32) {
+fn solve_rows(u: &mut Grid<f32>, band_rows: usize, step: f32, inv_kappa: f32) {
     let w = u.width;
-    u.data.par_chunks_mut(w * lanes_for(u.height)).for_each(|band| {
+    u.data.par_chunks_mut(w * band_rows).for_each(|band| {
         let lanes = band.len() / w;
         with_scratch(w * lanes, |block, e, out| {
             transpose(band, None, lanes, w, block);
@@ -216,14 +218,13 @@ unsafe fn transpose_avx2(src: &[f32], plus: Option<&[f32]>, rows: usize, cols: u
 }
 
 /// The column pass from `u` (non-empty) into `next`'s values, whatever they were: stripes
-/// of `lanes_for` columns, read where they lie, each written by the task that solved it. Every
+/// of `stripe` columns, read where they lie, each written by the task that solved it. Every
 /// value is written, so none is set beforehand.
-fn solve_columns(u: &Grid<f32>, next: &mut Vec<f32>, step: f32, inv_kappa: f32) {
+fn solve_columns(u: &Grid<f32>, next: &mut Vec<f32>, stripe: usize, step: f32, inv_kappa: f32) {
     let (w, h) = (u.width, u.height);
     next.clear();
     next.reserve(w * h);
     let dst = StripeWriter(next.as_mut_ptr());
-    let stripe = lanes_for(w);
     (0..w.div_ceil(stripe)).into_par_iter().for_each(|k| {
         let x0 = k * stripe;
         let lanes = stripe.min(w - x0);
