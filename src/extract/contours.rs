@@ -6,11 +6,10 @@
 //! OpenCV's findContours and imageproc's `find_contours`), with 8-connectivity, the
 //! connectivity of the regions, so a contour and its region always agree. Here it runs on
 //! the label image itself, visiting only a region's pixels and its border: no mask per
-//! region, no scan of its bounding box. Douglas-Peucker (imageproc) simplifies.
+//! region, no scan of its bounding box. Douglas-Peucker, as imageproc's, simplifies.
 
 use std::ops::Range;
 
-use imageproc::geometry::approximate_polygon_dp;
 use imageproc::point::Point;
 use rayon::prelude::*;
 
@@ -46,28 +45,41 @@ pub fn trace(seg: &Segmentation, simplify_px: f64, wanted: &[bool]) -> Vec<Regio
                 return region;
             }
             let shape = Shape { labels: &seg.labels.data, width: w, height: h, label };
-            let borders = MARKS.with_borrow_mut(|marks| {
+            SCRATCH.with_borrow_mut(|Scratch { marks, points, simple }| {
                 marks.cover(w * h);
-                follow_borders(&shape, pixels, marks)
-            });
-            let Some(oi) = borders.iter().position(|b| b.kind == BorderKind::Outer) else { return region };
-            region.outer = offset_ring(&simplify(&borders[oi].points, simplify_px), 0.5);
-            for b in &borders {
-                if b.kind == BorderKind::Hole && b.parent == Some(oi) {
-                    let hole = simplify(&b.points, simplify_px);
-                    if hole.len() >= 3 {
-                        region.holes.push(offset_ring(&hole, -0.5));
+                points.clear();
+                let borders = follow_borders(&shape, pixels, marks, points);
+                let Some(oi) = borders.iter().position(|b| b.kind == BorderKind::Outer) else { return };
+                region.outer = offset_ring(&simplify(&points[borders[oi].points.clone()], simplify_px, simple), 0.5);
+                for b in &borders {
+                    if b.kind == BorderKind::Hole && b.parent == Some(oi) {
+                        let hole = simplify(&points[b.points.clone()], simplify_px, simple);
+                        if hole.len() >= 3 {
+                            region.holes.push(offset_ring(&hole, -0.5));
+                        }
                     }
                 }
-            }
+            });
             region
         })
         .collect()
 }
 
+/// What tracing a region needs besides the region, kept by each thread from frame to
+/// frame: a frame traces a hundred borders or more (every dropout inside a region is a
+/// hole), and their few points each were as many allocations.
+#[derive(Default)]
+struct Scratch {
+    /// `follow_borders`' marks, all 0 between calls.
+    marks: Marks,
+    /// The borders' pixels, one after the other.
+    points: Vec<Point<i32>>,
+    /// `simplify`'s corners and kept vertices.
+    simple: [Vec<Point<i32>>; 2],
+}
+
 thread_local! {
-    /// `follow_borders`' marks, all 0 between calls: made once per thread.
-    static MARKS: std::cell::RefCell<Marks> = const { std::cell::RefCell::new(Marks::new()) };
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
 }
 
 /// Border following's mark of each pixel (0: none yet), and a bit a pixel saying which are
@@ -165,10 +177,11 @@ pub enum BorderKind {
     Hole,
 }
 
-/// One border: its pixels in the order followed, and the index of the border around it.
+/// One border: where its pixels, in the order followed, lie in the list `follow_borders`
+/// fills, and the index of the border around it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Border {
-    pub points: Vec<Point<i32>>,
+    pub points: Range<usize>,
     pub kind: BorderKind,
     pub parent: Option<usize>,
 }
@@ -180,8 +193,9 @@ const WEST: usize = 0;
 
 /// Every border of `shape`, whose pixel indices are `pixels` (ascending), as Suzuki &
 /// Abe's algorithm 1 finds them scanning the shape with a background margin around the
-/// image. `marks` (covering the image) must be all clear, and is again on return.
-pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut Marks) -> Vec<Border> {
+/// image, their pixels appended to `points`. `marks` (covering the image) must be all
+/// clear, and is again on return.
+pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut Marks, points: &mut Vec<Point<i32>>) -> Vec<Border> {
     // marks: 0 = a pixel no border has passed; n >= 2 = passed by border n - 2 (its
     // number in the paper); -n = passed by it with its east neighbour, background, seen.
     let w = shape.width;
@@ -216,8 +230,9 @@ pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut Marks) -> Vec<B
                     borders[p].parent
                 }
             });
-            let points = follow(shape, (x as i32, y as i32), from, number, marks);
-            borders.push(Border { points, kind, parent: parent.flatten() });
+            let start = points.len();
+            follow(shape, (x as i32, y as i32), from, number, marks, points);
+            borders.push(Border { points: start..points.len(), kind, parent: parent.flatten() });
         }
         let mark = marks.get(i);
         if mark != 0 {
@@ -244,7 +259,7 @@ pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut Marks) -> Vec<B
         }
     }
     for b in &borders {
-        for p in &b.points {
+        for p in &points[b.points.clone()] {
             marks.clear(p.y as usize * w + p.x as usize);
         }
     }
@@ -252,8 +267,9 @@ pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut Marks) -> Vec<B
 }
 
 /// Follows the border through `start`, whose neighbour towards `from` is background,
-/// marking its pixels with `number` (step 3 of the paper's algorithm 1).
-fn follow(shape: &Shape, start: (i32, i32), from: usize, number: i32, marks: &mut Marks) -> Vec<Point<i32>> {
+/// marking its pixels with `number` (step 3 of the paper's algorithm 1) and appending them
+/// to `points`.
+fn follow(shape: &Shape, start: (i32, i32), from: usize, number: i32, marks: &mut Marks, points: &mut Vec<Point<i32>>) {
     let width = shape.width;
     let step = |(x, y): (i32, i32), d: usize| (x + DIRECTIONS[d].0, y + DIRECTIONS[d].1);
     let at = |(x, y): (i32, i32)| y as usize * width + x as usize;
@@ -263,13 +279,13 @@ fn follow(shape: &Shape, start: (i32, i32), from: usize, number: i32, marks: &mu
         shape.has(x, y)
     }) else {
         marks.put(at(start), -number);
-        return vec![Point::new(start.0, start.1)];
+        points.push(Point::new(start.0, start.1));
+        return;
     };
     let second = step(start, first);
     // `back`: the direction from the current pixel to the one before it; the second pixel
     // stands before the start. A step in direction d lands where d + 4 points back.
     let (mut current, mut back) = (start, first);
-    let mut points = Vec::new();
     loop {
         points.push(Point::new(current.0, current.1));
         // Counter-clockwise from just before the pixel we came from: the next border pixel
@@ -297,30 +313,66 @@ fn follow(shape: &Shape, start: (i32, i32), from: usize, number: i32, marks: &mu
         }
         (current, back) = (following, (next + 4) % 8);
     }
-    points
 }
 
-/// Douglas-Peucker (imageproc's) on a traced border. It runs on the border's corners only:
-/// the first and last pixels and each pixel where the step to the next one turns. A pixel
-/// inside a straight stretch is never the one picked: its distance to a chord is exact
-/// (integer coordinates, the same divisor), affine along the stretch, so the stretch's
-/// largest is at an end and an inner pixel only ties with the first end, which comes
-/// before it and wins. The same polygon from a fifth to a tenth of the points.
-fn simplify(pts: &[Point<i32>], tolerance: f64) -> Vec<[f32; 2]> {
-    let simple = if pts.len() > 3 { approximate_polygon_dp(&corners(pts), tolerance, true) } else { pts.to_vec() };
+/// Douglas-Peucker on a traced border (closed), as imageproc's `approximate_polygon_dp`
+/// gives it. It runs on the border's corners only: the first and last pixels and each
+/// pixel where the step to the next one turns. A pixel inside a straight stretch is never
+/// the one picked: its distance to a chord is exact (integer coordinates, the same
+/// divisor), affine along the stretch, so the stretch's largest is at an end and an inner
+/// pixel only ties with the first end, which comes before it and wins. The same polygon
+/// from a fifth to a tenth of the points. `scratch` holds the corners and the kept ones.
+fn simplify(pts: &[Point<i32>], tolerance: f64, scratch: &mut [Vec<Point<i32>>; 2]) -> Vec<[f32; 2]> {
+    let [corners, kept] = scratch;
+    let simple: &[Point<i32>] = if pts.len() > 3 {
+        corners_of(pts, corners);
+        kept.clear();
+        kept.push(corners[0]);
+        douglas_peucker(corners, tolerance, kept);
+        // A closed curve: its last corner is not repeated (it is the first's neighbour).
+        kept.pop();
+        kept
+    } else {
+        pts
+    };
     simple.iter().map(|p| [p.x as f32, p.y as f32]).collect()
 }
 
-/// The first and last points of a chain and every point where its step turns.
-fn corners(pts: &[Point<i32>]) -> Vec<Point<i32>> {
+/// Douglas-Peucker's recursion as imageproc's `approximate_polygon_dp` runs it, appending
+/// the curve's vertices after the first to `out`, without its allocation a step (several
+/// per vertex kept, a hundred borders a frame). The farthest vertex from the chord is the
+/// first with the largest |a x + b y + c| (integers: the same order as imageproc's
+/// distances, which divide them all by one norm), split at when its distance exceeds
+/// `tolerance`. The simplify test holds the result to imageproc's.
+fn douglas_peucker(curve: &[Point<i32>], tolerance: f64, out: &mut Vec<Point<i32>>) {
+    let (p, q) = (curve[0], curve[curve.len() - 1]);
+    let (a, b) = (i64::from(p.y - q.y), i64::from(q.x - p.x));
+    let c = i64::from(p.x) * i64::from(q.y) - i64::from(q.x) * i64::from(p.y);
+    let (mut farthest, mut index) = (0, 0);
+    for (i, v) in curve.iter().enumerate().skip(1) {
+        let d = (a * i64::from(v.x) + b * i64::from(v.y) + c).abs();
+        if d > farthest {
+            (farthest, index) = (d, i);
+        }
+    }
+    // As imageproc divides (a chord of one point: 0 / 0, never above the tolerance).
+    if farthest as f64 / ((a * a + b * b) as f64).sqrt() > tolerance {
+        douglas_peucker(&curve[..=index], tolerance, out);
+        douglas_peucker(&curve[index..], tolerance, out);
+    } else {
+        out.push(q);
+    }
+}
+
+/// The first and last points of a chain and every point where its step turns, into `out`.
+fn corners_of(pts: &[Point<i32>], out: &mut Vec<Point<i32>>) {
     let step = |a: Point<i32>, b: Point<i32>| (b.x - a.x, b.y - a.y);
-    let mut out = Vec::with_capacity(pts.len() / 4 + 2);
+    out.clear();
     out.extend(pts.first());
     out.extend(pts.windows(3).filter(|t| step(t[0], t[1]) != step(t[1], t[2])).map(|t| t[1]));
     if pts.len() > 1 {
         out.extend(pts.last());
     }
-    out
 }
 
 /// The ring with every edge moved `d` pixels away from the ring's inside (d < 0: towards
@@ -368,17 +420,26 @@ mod tests {
     use super::*;
     use image::{GrayImage, Luma};
     use imageproc::contours::{BorderType, find_contours};
+    use imageproc::geometry::approximate_polygon_dp;
     use rand::{RngExt, SeedableRng};
 
+    /// A border with its own pixels: what imageproc hands back.
+    #[derive(Debug, PartialEq)]
+    struct Traced {
+        points: Vec<Point<i32>>,
+        kind: BorderKind,
+        parent: Option<usize>,
+    }
+
     /// imageproc's Suzuki & Abe, on the shape with the background margin drawn in.
-    fn imageproc_borders(shape: &[bool], w: usize, h: usize) -> Vec<Border> {
+    fn imageproc_borders(shape: &[bool], w: usize, h: usize) -> Vec<Traced> {
         let mut mask = GrayImage::new(w as u32 + 2, h as u32 + 2);
         for (i, _) in shape.iter().enumerate().filter(|(_, s)| **s) {
             mask.put_pixel((i % w) as u32 + 1, (i / w) as u32 + 1, Luma([255]));
         }
         find_contours::<i32>(&mask)
             .into_iter()
-            .map(|c| Border {
+            .map(|c| Traced {
                 points: c.points.iter().map(|p| Point::new(p.x - 1, p.y - 1)).collect(),
                 kind: if c.border_type == BorderType::Outer { BorderKind::Outer } else { BorderKind::Hole },
                 parent: c.parent,
@@ -433,7 +494,12 @@ mod tests {
             let pixels: Vec<u32> = (0..w * h).filter(|&i| shape[i]).map(|i| i as u32).collect();
             let mut marks = Marks::new();
             marks.cover(w * h);
-            let ours = follow_borders(&Shape { labels: &labels, width: w, height: h, label: 3 }, &pixels, &mut marks);
+            let mut points = vec![Point::new(-1, -1)];
+            let shape_3 = Shape { labels: &labels, width: w, height: h, label: 3 };
+            let ours: Vec<Traced> = follow_borders(&shape_3, &pixels, &mut marks, &mut points)
+                .into_iter()
+                .map(|b| Traced { points: points[b.points].to_vec(), kind: b.kind, parent: b.parent })
+                .collect();
             assert_eq!(ours, imageproc_borders(&shape, w, h), "case {case}: {w}x{h} at density {density}");
             assert!(marks.all_clear(), "case {case}: marks left behind");
             for b in &ours {
@@ -449,6 +515,8 @@ mod tests {
         // (long stretches, parallel to chords), at tolerances from under a pixel to many.
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         let (mut compared, mut fewer) = (0, 0);
+        // Carried from border to border, as tracing carries it.
+        let mut scratch = [Vec::new(), Vec::new()];
         for case in 0..400 {
             let (w, h) = (rng.random_range(3..60), rng.random_range(3..50));
             let shape: Vec<bool> = if case % 2 == 0 {
@@ -476,9 +544,14 @@ mod tests {
                     } else {
                         border.points.iter().map(|p| [p.x as f32, p.y as f32]).collect()
                     };
-                    assert_eq!(simplify(&border.points, tolerance), every, "case {case}, tolerance {tolerance}");
+                    assert_eq!(
+                        simplify(&border.points, tolerance, &mut scratch),
+                        every,
+                        "case {case}, tolerance {tolerance}"
+                    );
                     compared += 1;
-                    fewer += usize::from(corners(&border.points).len() * 2 < border.points.len());
+                    corners_of(&border.points, &mut scratch[0]);
+                    fewer += usize::from(scratch[0].len() * 2 < border.points.len());
                 }
             }
         }
