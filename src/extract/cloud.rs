@@ -1,77 +1,67 @@
-//! A frame's raw camera-frame points, one per pixel, computed once: the region steps
-//! (fits, leak splits, joins, growth, polygons) each read points of many pixels, and a
-//! lookup is cheaper than back-projecting a pixel index (a division) every time.
+//! A frame's raw camera-frame points, one per pixel: the region steps (fits, leak splits,
+//! joins, growth, polygons) each read points of many pixels.
+//!
+//! The points are not stored: pixel (u, v) of depth z is (x_u z, y_v z, z), the rays' x_u
+//! and y_v computed once per column and row, so a point costs two products where it is
+//! read. A stored cloud was three times the depth's size (12 bytes a pixel), written once
+//! and read whole twice or more a frame (the fits' points, growth, the grown regions'
+//! points): at 640x480, 3.7 MB that no cache holds. The products are the ones the stored
+//! cloud held, so every reader sees the same bits.
 
 use std::ops::Range;
 
 use super::Grid;
-use crate::grid::par_rows;
 use crate::types::Intrinsics;
 
-pub struct Cloud {
+pub struct Cloud<'a> {
     pub width: usize,
-    /// Pixel i's point (x, y, z) in metres, z = 0 where the depth is invalid.
-    points: Vec<[f32; 3]>,
+    /// Depth, m (0 = invalid).
+    depth: &'a [f32],
+    /// x / z of column u's ray.
+    ray_x: Vec<f32>,
+    /// y / z of row v's ray.
+    ray_y: Vec<f32>,
 }
 
-impl Cloud {
-    /// Back-projects every pixel of a depth image in metres (0 = invalid).
-    pub fn new(depth: &Grid<f32>, intr: &Intrinsics) -> Cloud {
-        let w = depth.width;
-        let ray_x: Vec<f32> = (0..w).map(|u| ((u as f64 - intr.cx) / intr.fx) as f32).collect();
-        let points = par_rows(w, depth.height, [0.0f32; 3], 1, |v, row| {
-            let ray_y = ((v as f64 - intr.cy) / intr.fy) as f32;
-            back_project_row(&depth.data[v * w..(v + 1) * w], &ray_x, ray_y, row);
-        });
-        Cloud { width: w, points }
+impl<'a> Cloud<'a> {
+    /// The points of a depth image in metres (0 = invalid).
+    pub fn new(depth: &'a Grid<f32>, intr: &Intrinsics) -> Cloud<'a> {
+        let ray_x = (0..depth.width).map(|u| ((u as f64 - intr.cx) / intr.fx) as f32).collect();
+        let ray_y = (0..depth.height).map(|v| ((v as f64 - intr.cy) / intr.fy) as f32).collect();
+        Cloud { width: depth.width, depth: &depth.data, ray_x, ray_y }
     }
 
     /// Pixel i's point, None where its depth is invalid.
     #[inline]
     pub fn point(&self, i: usize) -> Option<[f32; 3]> {
-        let p = self.points[i];
-        has_depth(&p).then_some(p)
+        let z = self.depth[i];
+        (z != 0.0).then(|| [self.ray_x[i % self.width] * z, self.ray_y[i / self.width] * z, z])
     }
 
-    /// Appends the points of the valid pixels among `pixels` (consecutive indices), in
-    /// order: a run with no dropout, the usual case, is copied whole.
+    /// Appends the points of the valid pixels among `pixels` (consecutive indices within
+    /// one row), in order: a run with no dropout, the usual case, is back-projected whole.
     #[inline]
     pub fn extend_valid(&self, pixels: Range<usize>, out: &mut Vec<[f32; 3]>) {
-        let points = &self.points[pixels];
-        if points.iter().fold(true, |all, p| all & has_depth(p)) {
-            out.extend_from_slice(points);
+        let (z, ray_x, ray_y) = self.row_part(pixels);
+        if z.iter().fold(true, |all, &z| all & (z != 0.0)) {
+            out.extend(z.iter().zip(ray_x).map(|(&z, &x)| [x * z, ray_y * z, z]));
         } else {
-            out.extend(points.iter().filter(|p| has_depth(p)));
+            out.extend(z.iter().zip(ray_x).filter(|(z, _)| **z != 0.0).map(|(&z, &x)| [x * z, ray_y * z, z]));
         }
     }
 
-    /// The points of consecutive pixels, invalid ones included (z = 0: `has_depth`).
+    /// The depths of consecutive pixels within one row, their columns' ray x / z, and the
+    /// row's ray y / z: their points, invalid ones included, are (x z, y z, z).
     #[inline]
-    pub fn points(&self, pixels: Range<usize>) -> &[[f32; 3]] {
-        &self.points[pixels]
+    pub fn row_part(&self, pixels: Range<usize>) -> (&[f32], &[f32], f32) {
+        let (v, u) = (pixels.start / self.width, pixels.start % self.width);
+        let len = pixels.len();
+        (&self.depth[pixels], &self.ray_x[u..u + len], self.ray_y[v])
     }
 
     /// Pixel i's depth, m (0 = invalid).
     #[inline]
     pub fn depth(&self, i: usize) -> f32 {
-        self.points[i][2]
-    }
-}
-
-/// Whether a pixel's point is one: an invalid depth back-projects to z = 0.
-#[inline(always)]
-pub fn has_depth(p: &[f32; 3]) -> bool {
-    p[2] != 0.0
-}
-
-crate::extract::cpu::widest_simd! {
-    /// A row's points: depth z at a pixel whose ray is (x, y, 1) is (x z, y z, z).
-    fn back_project_row(z: &[f32], ray_x: &[f32], ray_y: f32, out: &mut [[f32; 3]]) = back_project_row_portable
-}
-
-#[inline(always)]
-fn back_project_row_portable(z: &[f32], ray_x: &[f32], ray_y: f32, out: &mut [[f32; 3]]) {
-    for ((p, &z), &x) in out.iter_mut().zip(z).zip(ray_x) {
-        *p = [x * z, ray_y * z, z];
+        self.depth[i]
     }
 }

@@ -299,12 +299,8 @@ pub fn extract_with(
     let (images, seg, cloud, mut gpu) = match twin {
         Twin::Cpu => {
             let images = cpu::image_stages(&depth, intr, cfg, &mut times, &mut lap);
-            // The cloud needs only the depth: it is built beside the components, which
-            // one thread labels (timed with them).
-            let (seg, cloud) = rayon::join(
-                || Segmentation::components(&images.boundary, MIN_REGION_PIXELS),
-                || Cloud::new(&depth, intr),
-            );
+            let seg = Segmentation::components(&images.boundary, MIN_REGION_PIXELS);
+            let cloud = Cloud::new(&depth, intr);
             times.regions = lap();
             (Some(images), seg, cloud, None)
         }

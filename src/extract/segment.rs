@@ -17,7 +17,7 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 
 use super::Grid;
-use super::cloud::{Cloud, has_depth};
+use super::cloud::Cloud;
 use super::cpu::ransac::{PlaneFit, PointBatch, refit, support};
 use crate::grid::{component_runs, first_other, flood, for_each_set, leading, par_rows, runs};
 
@@ -224,18 +224,18 @@ fn plane_image(
     let planes: Vec<[f64; 4]> =
         fits.iter().map(|f| f.map_or([f64::NAN; 4], |f| [f.normal.x, f.normal.y, f.normal.z, f.offset])).collect();
     let data = par_rows(w, labels.height, 0u32, 8, |v, out| {
-        let (held, points) = (&labels.data[v * w..(v + 1) * w], cloud.points(v * w..(v + 1) * w));
-        plane_row(nearby, &planes, points, held, v, dist as f64, out);
+        let (held, row) = (&labels.data[v * w..(v + 1) * w], cloud.row_part(v * w..(v + 1) * w));
+        plane_row(nearby, &planes, row, held, v, dist as f64, out);
     });
     Grid { width: w, height: labels.height, data }
 }
 
 crate::extract::cpu::widest_simd! {
-    /// `plane_image`'s row v: `held` its labels, `points` its points.
+    /// `plane_image`'s row v: `held` its labels, `row` its points (`Cloud::row_part`).
     fn plane_row(
         nearby: &NearbyRegions,
         planes: &[[f64; 4]],
-        points: &[[f32; 3]],
+        row: (&[f32], &[f32], f32),
         held: &[u32],
         v: usize,
         dist: f64,
@@ -250,14 +250,14 @@ crate::extract::cpu::widest_simd! {
 fn plane_row_portable(
     nearby: &NearbyRegions,
     planes: &[[f64; 4]],
-    points: &[[f32; 3]],
+    (depth, ray_x, ray_y): (&[f32], &[f32], f32),
     held: &[u32],
     v: usize,
     dist: f64,
     out: &mut [u32],
 ) {
-    let cells = out.chunks_mut(CELL_PX).zip(held.chunks(CELL_PX)).zip(points.chunks(CELL_PX));
-    for (c, ((out, held), points)) in cells.enumerate() {
+    let cells = out.chunks_mut(CELL_PX).zip(held.chunks(CELL_PX)).zip(depth.chunks(CELL_PX).zip(ray_x.chunks(CELL_PX)));
+    for (c, ((out, held), (depth, ray_x))) in cells.enumerate() {
         if held.iter().all(|&l| l != 0) {
             continue;
         }
@@ -265,15 +265,16 @@ fn plane_row_portable(
         let mut label = [0u32; CELL_PX];
         for &l in nearby.around(c * CELL_PX, v) {
             let [nx, ny, nz, offset] = planes[l as usize - 1];
-            for ((p, nearest), label) in points.iter().zip(&mut nearest).zip(&mut label) {
+            for (((&z, &x), nearest), label) in depth.iter().zip(ray_x).zip(&mut nearest).zip(&mut label) {
+                let p = [x * z, ray_y * z, z];
                 let e = (nx * p[0] as f64 + ny * p[1] as f64 + nz * p[2] as f64 + offset).abs();
                 let take = (e < dist) & (e < *nearest);
                 *nearest = if take { e } else { *nearest };
                 *label = if take { l } else { *label };
             }
         }
-        for (((o, &h), p), &l) in out.iter_mut().zip(held).zip(points).zip(&label) {
-            *o = if (h == 0) & has_depth(p) { l } else { 0 };
+        for (((o, &h), &z), &l) in out.iter_mut().zip(held).zip(depth).zip(&label) {
+            *o = if (h == 0) & (z != 0.0) { l } else { 0 };
         }
     }
 }
