@@ -494,6 +494,7 @@ mod tests {
             let pixels: Vec<u32> = (0..w * h).filter(|&i| shape[i]).map(|i| i as u32).collect();
             let mut marks = Marks::new();
             marks.cover(w * h);
+            // Not empty: a border's range says where its pixels lie, whatever came before.
             let mut points = vec![Point::new(-1, -1)];
             let shape_3 = Shape { labels: &labels, width: w, height: h, label: 3 };
             let ours: Vec<Traced> = follow_borders(&shape_3, &pixels, &mut marks, &mut points)
