@@ -131,12 +131,32 @@ fn solve_rows(u: &mut Grid<f32>, band_rows: usize, step: f32, inv_kappa: f32) {
 /// transposes of a row pass cost two thirds of its solve. The sum is the one a separate
 /// pass would add, in the same order (the same bits), without that pass.
 fn transpose(src: &[f32], plus: Option<&[f32]>, rows: usize, cols: usize, dst: &mut [f32]) {
+    transpose_at(super::simd::level(), src, plus, rows, cols, dst);
+}
+
+/// `transpose` at `level` (at most what the CPU has): 16 x 16 tiles at AVX-512, 8 x 8 at AVX2.
+fn transpose_at(
+    level: super::simd::Level,
+    src: &[f32],
+    plus: Option<&[f32]>,
+    rows: usize,
+    cols: usize,
+    dst: &mut [f32],
+) {
     let (src, dst) = (&src[..rows * cols], &mut dst[..rows * cols]);
     let plus = plus.map(|p| &p[..rows * cols]);
     #[cfg(target_arch = "x86_64")]
-    if super::simd::level() >= super::simd::Level::Avx2 {
-        // SAFETY: the CPU has AVX2; the slices are rows * cols long.
-        return unsafe { transpose_avx2(src, plus, rows, cols, dst) };
+    {
+        use super::simd::Level;
+        debug_assert!(level <= Level::detected());
+        match level {
+            // SAFETY: the CPU has AVX-512 F (the level is at most what it has); the slices are
+            // rows * cols long.
+            Level::Avx512 => return unsafe { transpose_avx512(src, plus, rows, cols, dst) },
+            // SAFETY: as above, with AVX2.
+            Level::Avx2 => return unsafe { transpose_avx2(src, plus, rows, cols, dst) },
+            Level::Baseline => {}
+        }
     }
     transpose_part(src, plus, (0..rows, 0..cols), rows, cols, dst);
 }
@@ -211,6 +231,70 @@ unsafe fn transpose_avx2(src: &[f32], plus: Option<&[f32]>, rows: usize, cols: u
                 for k in 0..4 {
                     _mm256_storeu_ps(out.add(k * rows), _mm256_permute2f128_ps::<0x20>(q[k], q[k + 4]));
                     _mm256_storeu_ps(out.add((k + 4) * rows), _mm256_permute2f128_ps::<0x31>(q[k], q[k + 4]));
+                }
+            }
+        }
+    }
+}
+
+/// The side of `transpose_avx512`'s tiles.
+const WIDE_TILE: usize = 16;
+
+/// `transpose` on AVX-512: each whole 16 x 16 tile in registers (pairs interleaved, then
+/// quads, then the 128-bit quarters in two steps), 64 shuffles for 256 values where AVX2's
+/// 8 x 8 tiles take 32 for 64: the shuffle port bounds them. The tiles at the edges
+/// element by element.
+///
+/// # Safety
+/// The CPU has AVX-512 F; `src`, `plus` and `dst` hold rows * cols values.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn transpose_avx512(src: &[f32], plus: Option<&[f32]>, rows: usize, cols: usize, dst: &mut [f32]) {
+    use std::arch::x86_64::*;
+    for r0 in (0..rows).step_by(WIDE_TILE) {
+        for c0 in (0..cols).step_by(WIDE_TILE) {
+            if r0 + WIDE_TILE > rows || c0 + WIDE_TILE > cols {
+                let part = (r0..rows.min(r0 + WIDE_TILE), c0..cols.min(c0 + WIDE_TILE));
+                transpose_part(src, plus, part, rows, cols, dst);
+                continue;
+            }
+            // SAFETY: the tile's 16 rows of 16 lie within `src` and `plus` (the last element
+            // read is (r0 + 15) * cols + c0 + 15 < rows * cols) and its 16 columns of 16
+            // within `dst`; loads and stores are unaligned ones.
+            unsafe {
+                let at = |k: usize| (r0 + k) * cols + c0;
+                // Row k: a[k][0..16], in four 128-bit quarters of four columns each.
+                let r: [__m512; 16] = std::array::from_fn(|k| {
+                    let x = _mm512_loadu_ps(src.as_ptr().add(at(k)));
+                    plus.map_or(x, |p| _mm512_add_ps(x, _mm512_loadu_ps(p.as_ptr().add(at(k)))))
+                });
+                // Rows 2k and 2k + 1 interleaved: quarter j of t[2k] holds columns 4j and
+                // 4j + 1 of both, of t[2k + 1] columns 4j + 2 and 4j + 3.
+                let t: [__m512; 16] = std::array::from_fn(|i| {
+                    let (a, b) = (r[i & !1], r[i | 1]);
+                    if i % 2 == 0 { _mm512_unpacklo_ps(a, b) } else { _mm512_unpackhi_ps(a, b) }
+                });
+                // Quarter j of u[4m + c]: column 4j + c of rows 4m ..= 4m + 3.
+                let u: [__m512; 16] = std::array::from_fn(|i| {
+                    let (m4, c) = (i & !3, i & 3);
+                    let (a, b) = (t[m4 + c / 2], t[m4 + c / 2 + 2]);
+                    if c % 2 == 0 { _mm512_shuffle_ps::<0x44>(a, b) } else { _mm512_shuffle_ps::<0xEE>(a, b) }
+                });
+                let out = dst.as_mut_ptr().add(c0 * rows + r0);
+                for c in 0..4 {
+                    // Column 4j + c is quarter j of u[c], u[4 + c], u[8 + c] and u[12 + c].
+                    let (a, b, p, q) = (u[c], u[4 + c], u[8 + c], u[12 + c]);
+                    let (ab01, ab23) = (_mm512_shuffle_f32x4::<0x44>(a, b), _mm512_shuffle_f32x4::<0xEE>(a, b));
+                    let (pq01, pq23) = (_mm512_shuffle_f32x4::<0x44>(p, q), _mm512_shuffle_f32x4::<0xEE>(p, q));
+                    let columns = [
+                        _mm512_shuffle_f32x4::<0x88>(ab01, pq01),
+                        _mm512_shuffle_f32x4::<0xDD>(ab01, pq01),
+                        _mm512_shuffle_f32x4::<0x88>(ab23, pq23),
+                        _mm512_shuffle_f32x4::<0xDD>(ab23, pq23),
+                    ];
+                    for (j, column) in columns.into_iter().enumerate() {
+                        _mm512_storeu_ps(out.add((4 * j + c) * rows), column);
+                    }
                 }
             }
         }
@@ -446,18 +530,28 @@ mod tests {
 
     #[test]
     fn transpose_is_the_element_by_element_one() {
-        for (rows, cols) in [(8, 8), (64, 97), (2, 97), (17, 9), (1, 1)] {
-            let src: Vec<f32> = (0..rows * cols).map(|i| i as f32).collect();
-            let mut dst = vec![f32::NAN; rows * cols];
-            let plus: Vec<f32> = (0..rows * cols).map(|i| (i * 7 % 13) as f32 * 0.25).collect();
-            let mut summed = vec![f32::NAN; rows * cols];
-            transpose(&src, None, rows, cols, &mut dst);
-            transpose(&src, Some(&plus), rows, cols, &mut summed);
-            for r in 0..rows {
-                for c in 0..cols {
-                    let i = r * cols + c;
-                    assert_eq!(dst[c * rows + r], src[i], "{rows} x {cols}, ({r}, {c})");
-                    assert_eq!(summed[c * rows + r], src[i] + plus[i], "{rows} x {cols}, ({r}, {c}), summed");
+        use crate::extract::cpu::simd::Level;
+        // Whole tiles of 8 and 16 and partial ones on either side, at every level the CPU has.
+        let sizes = [(8, 8), (16, 16), (64, 97), (2, 97), (17, 9), (1, 1), (48, 320), (320, 32), (33, 40)];
+        let levels: Vec<Level> = Level::ALL.into_iter().filter(|&l| l <= Level::detected()).collect();
+        for level in levels {
+            for (rows, cols) in sizes {
+                let src: Vec<f32> = (0..rows * cols).map(|i| i as f32).collect();
+                let mut dst = vec![f32::NAN; rows * cols];
+                let plus: Vec<f32> = (0..rows * cols).map(|i| (i * 7 % 13) as f32 * 0.25).collect();
+                let mut summed = vec![f32::NAN; rows * cols];
+                transpose_at(level, &src, None, rows, cols, &mut dst);
+                transpose_at(level, &src, Some(&plus), rows, cols, &mut summed);
+                for r in 0..rows {
+                    for c in 0..cols {
+                        let i = r * cols + c;
+                        assert_eq!(dst[c * rows + r], src[i], "{level:?}, {rows} x {cols}, ({r}, {c})");
+                        assert_eq!(
+                            summed[c * rows + r],
+                            src[i] + plus[i],
+                            "{level:?}, {rows} x {cols}, ({r}, {c}), summed"
+                        );
+                    }
                 }
             }
         }
