@@ -82,32 +82,45 @@ pub fn normal_planes(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32) -> Norma
     // invalid pixels dilated by the kernel's square, the outside counting as invalid.
     let invalid = Grid { width: w, height: h, data: z.iter().map(|&z| u8::from(z == 0.0)).collect() };
     let spoiled = morphology::dilate(&invalid, r, 1);
+    // The rays' x / z and y / z, once a column and once a row rather than a division a pixel
+    // each (the row loop was bound by its divisions): the same operations, so the same bits.
+    let ray_x: Vec<f32> = (0..w).map(|u| (u as f32 - cx) / fx).collect();
+    // The Sobel norm is a power of two, so multiplying by its reciprocal is dividing by it.
+    debug_assert!(norm.log2().fract() == 0.0);
     let planes = par_rows(4 * w, h, 0.0f32, ROWS_PER_TASK, |v, planes| {
         let row = v * w..(v + 1) * w;
-        let camera = [fx, fy, cx, cy, norm, v as f32];
-        normals_row(&z[row.clone()], &zu[row.clone()], &zv[row.clone()], &spoiled.data[row], planes, camera);
+        let camera = [fx, fy, (v as f32 - cy) / fy, 1.0 / norm];
+        normals_row(&z[row.clone()], &zu[row.clone()], &zv[row.clone()], &spoiled.data[row], &ray_x, planes, camera);
     });
     NormalPlanes { width: w, height: h, data: planes }
 }
 
 super::widest_simd! {
-    /// One row of normals as four planes into `planes` (4w); `camera` is [fx, fy, cx, cy,
-    /// the Sobel norm, the row's v].
-    fn normals_row(z: &[f32], zu: &[f32], zv: &[f32], spoiled: &[u8], planes: &mut [f32], camera: [f32; 6]) = normals_row_portable
+    /// One row of normals as four planes into `planes` (4w); `ray_x` is each column's ray
+    /// x / z, `camera` [fx, fy, the row's ray y / z, 1 / the Sobel norm].
+    fn normals_row(z: &[f32], zu: &[f32], zv: &[f32], spoiled: &[u8], ray_x: &[f32], planes: &mut [f32], camera: [f32; 4]) = normals_row_portable
 }
 
 /// Equal-length slices and a branch-free `surface_normal`: the loop vectorises.
 #[inline(always)]
-fn normals_row_portable(z: &[f32], zu: &[f32], zv: &[f32], spoiled: &[u8], planes: &mut [f32], camera: [f32; 6]) {
-    let [fx, fy, cx, cy, norm, v] = camera;
+fn normals_row_portable(
+    z: &[f32],
+    zu: &[f32],
+    zv: &[f32],
+    spoiled: &[u8],
+    ray_x: &[f32],
+    planes: &mut [f32],
+    camera: [f32; 4],
+) {
+    let [fx, fy, ray_y, inv_norm] = camera;
     let n = z.len();
-    let (z, zu, zv, spoiled) = (&z[..n], &zu[..n], &zv[..n], &spoiled[..n]);
+    let (z, zu, zv, spoiled, ray_x) = (&z[..n], &zu[..n], &zv[..n], &spoiled[..n], &ray_x[..n]);
     let (x, rest) = planes[..4 * n].split_at_mut(n);
     let (y, rest) = rest.split_at_mut(n);
     let (zn, valid) = rest.split_at_mut(n);
     let (x, y, zn, valid) = (&mut x[..n], &mut y[..n], &mut zn[..n], &mut valid[..n]);
     for u in 0..n {
-        let normal = surface_normal(z[u], zu[u] / norm, zv[u] / norm, u as f32, v, fx, fy, cx, cy);
+        let normal = normal_on_ray(z[u], zu[u] * inv_norm, zv[u] * inv_norm, ray_x[u], ray_y, fx, fy);
         let normal = if spoiled[u] == 0 { normal } else { [0.0; 3] };
         (x[u], y[u], zn[u]) = (normal[0], normal[1], normal[2]);
         // `|`, not `!=` on the arrays (which stops at the first difference): no branches.
@@ -147,7 +160,12 @@ pub fn normal_at(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32, u: usize, v:
 #[allow(clippy::too_many_arguments)]
 #[inline]
 pub fn surface_normal(z: f32, zu: f32, zv: f32, u: f32, v: f32, fx: f32, fy: f32, cx: f32, cy: f32) -> [f32; 3] {
-    let (x, y) = ((u - cx) / fx, (v - cy) / fy);
+    normal_on_ray(z, zu, zv, (u - cx) / fx, (v - cy) / fy, fx, fy)
+}
+
+/// `surface_normal` of the pixel whose ray is (x, y, 1).
+#[inline(always)]
+fn normal_on_ray(z: f32, zu: f32, zv: f32, x: f32, y: f32, fx: f32, fy: f32) -> [f32; 3] {
     let a = [zu * x + z / fx, zu * y, zu];
     let b = [zv * x, zv * y + z / fy, zv];
     let mut n = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
