@@ -145,24 +145,34 @@ fn transpose_at(
 ) {
     let (src, dst) = (&src[..rows * cols], &mut dst[..rows * cols]);
     let plus = plus.map(|p| &p[..rows * cols]);
+    // The side of the whole tiles a vector kernel transposed, if one ran.
     #[cfg(target_arch = "x86_64")]
-    {
+    let tile = {
         use super::simd::Level;
         debug_assert!(level <= Level::detected());
         match level {
             // SAFETY: the CPU has AVX-512 F (the level is at most what it has); the slices are
             // rows * cols long.
-            Level::Avx512 => return unsafe { transpose_avx512(src, plus, rows, cols, dst) },
+            Level::Avx512 => Some(unsafe { transpose_avx512(src, plus, rows, cols, dst) }),
             // SAFETY: as above, with AVX2.
-            Level::Avx2 => return unsafe { transpose_avx2(src, plus, rows, cols, dst) },
-            Level::Baseline => {}
+            Level::Avx2 => Some(unsafe { transpose_avx2(src, plus, rows, cols, dst) }),
+            Level::Baseline => None,
         }
-    }
-    transpose_part(src, plus, (0..rows, 0..cols), rows, cols, dst);
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let tile: Option<usize> = {
+        let _ = level;
+        None
+    };
+    // What the whole tiles leave, element by element: the rows below the last of them, and
+    // the columns right of it (everything where no kernel ran).
+    let (whole_rows, whole_cols) = tile.map_or((0, 0), |t| (rows / t * t, cols / t * t));
+    transpose_part(src, plus, (whole_rows..rows, 0..cols), rows, cols, dst);
+    transpose_part(src, plus, (0..whole_rows, whole_cols..cols), rows, cols, dst);
 }
 
-/// `transpose` of the given rows and columns only, element by element: the tiles at the
-/// edges, and everything without AVX2.
+/// `transpose` of the given rows and columns only, element by element: what the whole
+/// tiles leave, and everything without AVX2.
 fn transpose_part(
     src: &[f32],
     plus: Option<&[f32]>,
@@ -182,22 +192,18 @@ fn transpose_part(
 /// The side of `transpose`'s tiles.
 const TILE: usize = 8;
 
-/// `transpose` on AVX2: each whole 8 x 8 tile in registers (pairs interleaved, then quads,
-/// then the 128-bit halves swapped), the tiles at the edges element by element.
+/// `transpose` on AVX2 of every whole 8 x 8 tile, in registers (pairs interleaved, then
+/// quads, then the 128-bit halves swapped); returns the tile's side (`transpose_at` does
+/// the rest).
 ///
 /// # Safety
 /// The CPU has AVX2; `src`, `plus` and `dst` hold rows * cols values.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn transpose_avx2(src: &[f32], plus: Option<&[f32]>, rows: usize, cols: usize, dst: &mut [f32]) {
+unsafe fn transpose_avx2(src: &[f32], plus: Option<&[f32]>, rows: usize, cols: usize, dst: &mut [f32]) -> usize {
     use std::arch::x86_64::*;
-    for r0 in (0..rows).step_by(TILE) {
-        for c0 in (0..cols).step_by(TILE) {
-            if r0 + TILE > rows || c0 + TILE > cols {
-                let part = (r0..rows.min(r0 + TILE), c0..cols.min(c0 + TILE));
-                transpose_part(src, plus, part, rows, cols, dst);
-                continue;
-            }
+    for r0 in (0..rows / TILE * TILE).step_by(TILE) {
+        for c0 in (0..cols / TILE * TILE).step_by(TILE) {
             // SAFETY: the tile's 8 rows of 8 lie within `src` and `plus` (the last element read
             // is (r0 + 7) * cols + c0 + 7 < rows * cols) and its 8 columns of 8 within `dst`;
             // loads and stores are unaligned ones.
@@ -235,29 +241,25 @@ unsafe fn transpose_avx2(src: &[f32], plus: Option<&[f32]>, rows: usize, cols: u
             }
         }
     }
+    TILE
 }
 
 /// The side of `transpose_avx512`'s tiles.
 const WIDE_TILE: usize = 16;
 
-/// `transpose` on AVX-512: each whole 16 x 16 tile in registers (pairs interleaved, then
-/// quads, then the 128-bit quarters in two steps), 64 shuffles for 256 values where AVX2's
-/// 8 x 8 tiles take 32 for 64: the shuffle port bounds them. The tiles at the edges
-/// element by element.
+/// `transpose` on AVX-512 of every whole 16 x 16 tile, in registers (pairs interleaved,
+/// then quads, then the 128-bit quarters in two steps): 64 shuffles for 256 values where
+/// AVX2's 8 x 8 tiles take 32 for 64, and the shuffle port bounds them. Returns the tile's
+/// side (`transpose_at` does the rest).
 ///
 /// # Safety
 /// The CPU has AVX-512 F; `src`, `plus` and `dst` hold rows * cols values.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn transpose_avx512(src: &[f32], plus: Option<&[f32]>, rows: usize, cols: usize, dst: &mut [f32]) {
+unsafe fn transpose_avx512(src: &[f32], plus: Option<&[f32]>, rows: usize, cols: usize, dst: &mut [f32]) -> usize {
     use std::arch::x86_64::*;
-    for r0 in (0..rows).step_by(WIDE_TILE) {
-        for c0 in (0..cols).step_by(WIDE_TILE) {
-            if r0 + WIDE_TILE > rows || c0 + WIDE_TILE > cols {
-                let part = (r0..rows.min(r0 + WIDE_TILE), c0..cols.min(c0 + WIDE_TILE));
-                transpose_part(src, plus, part, rows, cols, dst);
-                continue;
-            }
+    for r0 in (0..rows / WIDE_TILE * WIDE_TILE).step_by(WIDE_TILE) {
+        for c0 in (0..cols / WIDE_TILE * WIDE_TILE).step_by(WIDE_TILE) {
             // SAFETY: the tile's 16 rows of 16 lie within `src` and `plus` (the last element
             // read is (r0 + 15) * cols + c0 + 15 < rows * cols) and its 16 columns of 16
             // within `dst`; loads and stores are unaligned ones.
@@ -299,6 +301,7 @@ unsafe fn transpose_avx512(src: &[f32], plus: Option<&[f32]>, rows: usize, cols:
             }
         }
     }
+    WIDE_TILE
 }
 
 /// The column pass from `u` (non-empty) into `next`'s values, whatever they were: stripes
