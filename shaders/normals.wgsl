@@ -1,5 +1,5 @@
 // Exact surface normals from smoothed depth: the GPU half of src/extract/cpu/normals.rs.
-// Separable Sobel taps (weights from the CPU side) give Z_u, Z_v; the normal is the
+// Sobel taps (weights from the CPU side) give Z_u, Z_v; the normal is the
 // cross product of the back-projected surface's tangents, facing the camera. A pixel
 // with any invalid tap, or within the kernel radius of the border, gets (0, 0, 0).
 
@@ -29,25 +29,34 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = v * p.width + u;
     let r = p.radius;
     if (v < r || v + r >= p.height || u < r || u + r >= p.width) { write(i, vec3<f32>(0.0)); return; }
+    let z = depth[i];
+    if (z == 0.0) { write(i, vec3<f32>(0.0)); return; }
+    // Each row's derivative along u and each column's along v as differences either side
+    // of the centre (exact on a smooth surface, so fused multiply-adds and the order of
+    // sums cannot change them), then smoothed: the CPU twin's order of sums. Row j's
+    // differences read every tap off column u, column j's every tap off row v.
     var gu = 0.0;
     var gv = 0.0;
-    let k = 2u * r + 1u;
-    // Row sums first, then the column: the CPU twin's order of sums, so both round alike.
-    for (var j = 0u; j < k; j++) {
-        var row_u = 0.0;
-        var row_v = 0.0;
-        for (var t = 0u; t < k; t++) {
-            let z = depth[(v + j - r) * p.width + u + t - r];
-            if (z == 0.0) { write(i, vec3<f32>(0.0)); return; }
-            row_u += weights[7u + t] * z;
-            row_v += weights[t] * z;
+    for (var j = 0u; j < 2u * r + 1u; j++) {
+        let row = (v + j - r) * p.width;
+        let column = u + j - r;
+        var along_u = 0.0;
+        var along_v = 0.0;
+        for (var k = 1u; k <= r; k++) {
+            let right = depth[row + u + k];
+            let left = depth[row + u - k];
+            let below = depth[(v + k) * p.width + column];
+            let above = depth[(v - k) * p.width + column];
+            if (right == 0.0 || left == 0.0 || below == 0.0 || above == 0.0) { write(i, vec3<f32>(0.0)); return; }
+            let c = weights[7u + r + k];
+            along_u += c * (right - left);
+            along_v += c * (below - above);
         }
-        gu += weights[j] * row_u;
-        gv += weights[7u + j] * row_v;
+        gu += weights[j] * along_u;
+        gv += weights[j] * along_v;
     }
     let zu = gu / p.norm;
     let zv = gv / p.norm;
-    let z = depth[i];
     let x = (f32(u) - p.cx) / p.fx;
     let y = (f32(v) - p.cy) / p.fy;
     let a = vec3<f32>(zu * x + z / p.fx, zu * y, zu);

@@ -77,7 +77,7 @@ pub fn normal_planes(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32) -> Norma
     let r = smooth.len() / 2;
     let (fx, fy, cx, cy) = (intr.fx as f32, intr.fy as f32, intr.cx as f32, intr.cy as f32);
     let z = &depth.data;
-    let (zu, zv) = (separable::filter(z, w, h, deriv, smooth), separable::filter(z, w, h, smooth, deriv));
+    let (zu, zv) = (separable::derivative_u(z, w, h, deriv, smooth), separable::derivative_v(z, w, h, deriv, smooth));
     // Every tap is valid where no invalid pixel, nor the border, is within r: the
     // invalid pixels dilated by the kernel's square, the outside counting as invalid.
     let invalid = Grid { width: w, height: h, data: z.iter().map(|&z| u8::from(z == 0.0)).collect() };
@@ -129,7 +129,9 @@ fn normals_row_portable(
 }
 
 /// The oracle of `normals`: pixel (u, v) alone, line for line as shaders/normals.wgsl
-/// computes it (row sums, then the column; any invalid tap or the border gives zero).
+/// computes it: each row's derivative along u and each column's along v as differences
+/// either side of the centre (`separable`'s order of sums), then their smoothing; any
+/// invalid tap or the border gives zero.
 pub fn normal_at(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32, u: usize, v: usize) -> [f32; 3] {
     let (w, h) = (depth.width, depth.height);
     let (smooth, deriv, norm) = sobel_kernel(kernel);
@@ -137,22 +139,29 @@ pub fn normal_at(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32, u: usize, v:
     if v < r || v + r >= h || u < r || u + r >= w {
         return [0.0; 3];
     }
+    let c = separable::half_derivative(deriv);
+    let z = |u: usize, v: usize| depth.data[v * w + u];
+    // Row j's differences read every tap off column u, column j's every tap off row v.
+    if z(u, v) == 0.0 {
+        return [0.0; 3];
+    }
     let (mut gu, mut gv) = (0.0f32, 0.0f32);
     for j in 0..smooth.len() {
-        let (mut row_u, mut row_v) = (0.0f32, 0.0f32);
-        for t in 0..smooth.len() {
-            let z = depth.data[(v + j - r) * w + u + t - r];
-            if z == 0.0 {
+        let (row, column) = (v + j - r, u + j - r);
+        let (mut along_u, mut along_v) = (0.0f32, 0.0f32);
+        for (k, &ck) in (1..).zip(c) {
+            let (right, left, below, above) = (z(u + k, row), z(u - k, row), z(column, v + k), z(column, v - k));
+            if right == 0.0 || left == 0.0 || below == 0.0 || above == 0.0 {
                 return [0.0; 3];
             }
-            row_u += deriv[t] * z;
-            row_v += smooth[t] * z;
+            along_u += ck * (right - left);
+            along_v += ck * (below - above);
         }
-        gu += smooth[j] * row_u;
-        gv += deriv[j] * row_v;
+        gu += smooth[j] * along_u;
+        gv += smooth[j] * along_v;
     }
     let (fx, fy, cx, cy) = (intr.fx as f32, intr.fy as f32, intr.cx as f32, intr.cy as f32);
-    surface_normal(depth.data[v * w + u], gu / norm, gv / norm, u as f32, v as f32, fx, fy, cx, cy)
+    surface_normal(z(u, v), gu / norm, gv / norm, u as f32, v as f32, fx, fy, cx, cy)
 }
 
 /// The exact normal of the back-projected surface at pixel (u, v) of depth z, from
