@@ -5,7 +5,7 @@
 // evenly strided scoring points together.
 
 // Field by field the Rust struct gpu::RansacParams.
-struct RansacParams { hypotheses: u32, regions: u32, inlier_distance: f32, max_score_points: u32 }
+struct RansacParams { hypotheses: u32, regions: u32, inlier_distance: f32, max_score_points: u32, min_sample_sine: f32 }
 
 @group(0) @binding(0) var<uniform> p: RansacParams;
 @group(0) @binding(1) var<storage, read> points: array<f32>;
@@ -50,7 +50,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         let e2 = c - a;
         let nv = vec3<f32>(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
         let len = sqrt(nv.x * nv.x + nv.y * nv.y + nv.z * nv.z);
-        if (len > 1e-12) {
+        let edges = sqrt((e1.x * e1.x + e1.y * e1.y + e1.z * e1.z) * (e2.x * e2.x + e2.y * e2.y + e2.z * e2.z));
+        // Nearly collinear samples give no plane (the CPU twin's plane_through).
+        if (len > p.min_sample_sine * edges) {
             let nn = nv / len;
             let d = -(nn.x * a.x + nn.y * a.y + nn.z * a.z);
             let stride = max((n + p.max_score_points - 1u) / p.max_score_points, 1u);

@@ -11,7 +11,7 @@ use wgpu::util::DeviceExt;
 
 use super::cpu::morphology::closing_passes;
 use super::cpu::normals::{NormalPlanes, sobel_kernel};
-use super::cpu::ransac::{MAX_SCORE_POINTS, PointBatch};
+use super::cpu::ransac::{MAX_SCORE_POINTS, MIN_SAMPLE_SINE, PointBatch};
 use super::{Grid, Images};
 use crate::config::PipelineConfig;
 use crate::types::Intrinsics;
@@ -85,6 +85,8 @@ pub struct RansacParams {
     pub regions: u32,
     pub inlier_distance: f32,
     pub max_score_points: u32,
+    /// `ransac::MIN_SAMPLE_SINE`.
+    pub min_sample_sine: f32,
 }
 
 /// The uniform of shaders/morphology.wgsl, field by field its `MorphologyParams`: one
@@ -883,7 +885,13 @@ impl Gpu {
             });
         }
         let b = self.ransac_buffers.as_ref().expect("made above");
-        let params = RansacParams { hypotheses, regions, inlier_distance, max_score_points: MAX_SCORE_POINTS as u32 };
+        let params = RansacParams {
+            hypotheses,
+            regions,
+            inlier_distance,
+            max_score_points: MAX_SCORE_POINTS as u32,
+            min_sample_sine: MIN_SAMPLE_SINE,
+        };
         self.queue.write_buffer(&b.params, 0, bytemuck::bytes_of(&params));
         if !batch.points.is_empty() {
             self.queue.write_buffer(&b.point_buffer, 0, bytemuck::cast_slice(&batch.points));
@@ -1006,7 +1014,13 @@ mod tests {
         assert_declared_as(
             RANSAC.source,
             "RansacParams",
-            fields!(RansacParams { hypotheses: u32, regions: u32, inlier_distance: f32, max_score_points: u32 }),
+            fields!(RansacParams {
+                hypotheses: u32,
+                regions: u32,
+                inlier_distance: f32,
+                max_score_points: u32,
+                min_sample_sine: f32
+            }),
             size_of::<RansacParams>(),
         );
     }

@@ -54,13 +54,20 @@ pub fn sample_index(region: u32, hypothesis: u32, j: u32, n: u32) -> u32 {
     hash(region.wrapping_mul(0x9e37_79b9) ^ hash(hypothesis * 3 + j)) % n
 }
 
-/// Plane through three points as (unit normal, offset), or None if they are collinear.
+/// Three points closer to collinear than this (the sine of the angle at the first) give
+/// no plane. The cross product of nearly parallel edges is mostly rounding, and rounding
+/// differs between the twins (a GPU may fuse multiply-adds): an absolute floor let an
+/// NVIDIA GPU score a plane where the CPU saw none.
+pub const MIN_SAMPLE_SINE: f32 = 1e-3;
+
+/// Plane through three points as (unit normal, offset), or None if they are (nearly) collinear.
 #[inline]
 pub fn plane_through(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> Option<([f32; 3], f32)> {
     let (e1, e2) = ([b[0] - a[0], b[1] - a[1], b[2] - a[2]], [c[0] - a[0], c[1] - a[1], c[2] - a[2]]);
     let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-    if !(len > 1e-12) {
+    let edges = ((e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]) * (e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2])).sqrt();
+    if !(len > MIN_SAMPLE_SINE * edges) {
         return None;
     }
     let n = [n[0] / len, n[1] / len, n[2] / len];
@@ -510,6 +517,22 @@ pub fn fits_from_scores(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn nearly_collinear_samples_give_no_plane() {
+        let (a, b) = ([0.1f32, 0.2, 1.5], [0.6f32, -0.3, 1.5]);
+        // Off the line a-b by 1e-5 of its length: a cross product far above any absolute
+        // floor, but mostly rounding, so no plane.
+        let c = [1.1f32, -0.8, 1.5 + 0.7e-5];
+        assert_eq!(plane_through(a, b, c), None);
+        // Off it by 1e-2: a plane, and all three points lie on it.
+        let c = [1.1f32, -0.8, 1.5 + 0.7e-2];
+        let (n, d) = plane_through(a, b, c).expect("a plane");
+        for p in [a, b, c] {
+            assert!((n[0] * p[0] + n[1] * p[1] + n[2] * p[2] + d).abs() < 1e-6);
+        }
+        assert_eq!(plane_through(a, a, c), None, "two equal points");
+    }
 
     #[test]
     fn refit_is_the_least_squares_plane_of_the_inliers_and_counts_their_support() {
