@@ -66,6 +66,7 @@ fn image_stages_agree_with_the_cpu_twin_on_every_mock_sequence() {
     let Some(gpu) = gpu() else { return };
     let mut gpu = gpu.lock().unwrap_or_else(|e| e.into_inner());
     let cfg = PipelineConfig::default();
+    let mut worst_depth = 0.0f32;
     for (name, seq, k) in mock_frames(5) {
         let depth = depth_metres(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
         let (g, regions) = gpu_images(&mut gpu, &depth, &seq, &cfg);
@@ -73,6 +74,7 @@ fn image_stages_agree_with_the_cpu_twin_on_every_mock_sequence() {
         let d = max_abs_diff(&g.smoothed.data, &c.smoothed.data);
         // A few ulps of depth (0.5 µm when written): the GPU may fuse multiply-adds.
         assert!(d <= 2e-6, "{name} frame {k}: diffusion differs by {d} m");
+        worst_depth = worst_depth.max(d);
         // Zeros (invalid) must agree exactly: holes are never filled by either twin.
         assert!(g.smoothed.data.iter().zip(&c.smoothed.data).all(|(a, b)| (*a == 0.0) == (*b == 0.0)));
 
@@ -91,6 +93,7 @@ fn image_stages_agree_with_the_cpu_twin_on_every_mock_sequence() {
         let free: Vec<bool> = g.boundary.data.iter().map(|&b| b == 0).collect();
         assert_eq!(labels, label_components(&free, g.boundary.width, g.boundary.height).0, "{name} frame {k}: regions");
     }
+    eprintln!("worst smoothed depth difference {worst_depth:e} m");
 }
 
 #[test]
@@ -116,6 +119,19 @@ fn whole_frames_give_the_same_polygons_on_both_twins() {
         }
     }
     assert!(compared > 50, "only {compared} polygons compared");
+}
+
+#[test]
+fn an_image_wider_than_the_diffusion_solves_is_refused_not_cut() {
+    let Some(gpu) = gpu() else { return };
+    let mut gpu = gpu.lock().unwrap_or_else(|e| e.into_inner());
+    let seq = Sequence::open("mock_frames/straight_320").unwrap();
+    let wide = Grid { width: 2049, height: 8, data: vec![1.5f32; 2049 * 8] };
+    let err = gpu.image_stages(&wide, &seq.intrinsics, &PipelineConfig::default(), false).err().expect("refused");
+    assert!(err.to_string().contains("2049x8"), "{err}");
+    // The device is still good for the next frame.
+    let depth = depth_metres(&seq.depth(0).unwrap(), &seq.intrinsics).unwrap();
+    assert!(gpu.image_stages(&depth, &seq.intrinsics, &PipelineConfig::default(), false).is_ok());
 }
 
 #[test]

@@ -31,7 +31,18 @@ pub enum GpuError {
     Dispatch(String),
     #[error("GPU readback failed: {0}")]
     Readback(String),
+    #[error(
+        "a {width}x{height} image is larger than the GPU's diffusion solves: lines of at most {DIFFUSION_MAX_LINE} pixels"
+    )]
+    TooLarge { width: u32, height: u32 },
 }
+
+/// The longest row or column shaders/diffusion.wgsl solves (its MAX_LINE): a workgroup
+/// holds a line's system in workgroup memory. The L515's largest depth image is 1024 x 768.
+pub const DIFFUSION_MAX_LINE: u32 = 2047;
+
+/// The workgroup memory that holds it: four arrays of 2048 f32.
+const DIFFUSION_WORKGROUP_BYTES: u32 = 4 * 4 * (DIFFUSION_MAX_LINE + 1);
 
 /// The uniform of shaders/diffusion.wgsl, field by field its `DiffusionParams`: one
 /// pass of implicit solves along every row or every column of the image.
@@ -147,7 +158,7 @@ use Access::{Read, ReadWrite, Uniform};
 pub const DIFFUSION: ShaderFile = ShaderFile {
     name: "diffusion",
     source: include_str!("../../shaders/diffusion.wgsl"),
-    bindings: &[Uniform, Read, ReadWrite, ReadWrite],
+    bindings: &[Uniform, Read, ReadWrite],
 };
 pub const NORMALS: ShaderFile = ShaderFile {
     name: "normals",
@@ -327,6 +338,15 @@ impl Gpu {
         }))
         .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
         let info = adapter.get_info();
+        if adapter.limits().max_compute_workgroup_storage_size < DIFFUSION_WORKGROUP_BYTES {
+            return Err(GpuError::NoDevice {
+                adapter: info.name,
+                reason: format!(
+                    "{} bytes of workgroup memory, and the diffusion's line solves take {DIFFUSION_WORKGROUP_BYTES}",
+                    adapter.limits().max_compute_workgroup_storage_size
+                ),
+            });
+        }
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("polymap"),
@@ -511,7 +531,6 @@ impl Gpu {
         let n = width as u64 * height as u64;
         let image = |label: &str, bytes_per_pixel: u64| self.buffer(label, n * bytes_per_pixel, IMAGE);
         let depth = [image("depth a", 4), image("depth b", 4)];
-        let factor = image("diffusion factors", 4);
         let normals = image("normals", 12);
         let (magnitude, sector, class) = (image("magnitude", 4), image("sector", 4), image("class", 4));
         let (parent, edge_labels, strong, edges) =
@@ -542,8 +561,8 @@ impl Gpu {
         let morphology_io = [(&lines, a), (a, b), (b, a), (a, &closed), (&holes, a), (a, b), (b, a), (a, &sealed)];
         let groups = FrameGroups {
             diffusion: [
-                self.bind(&self.diffusion, &[&diffusion_params[0], &depth[0], &depth[1], &factor]),
-                self.bind(&self.diffusion, &[&diffusion_params[1], &depth[1], &depth[0], &factor]),
+                self.bind(&self.diffusion, &[&diffusion_params[0], &depth[0], &depth[1]]),
+                self.bind(&self.diffusion, &[&diffusion_params[1], &depth[1], &depth[0]]),
             ],
             normals: self.bind(&self.normals, &[&normals_params, &depth[0], &sobel, &normals]),
             gradient: self.bind(&self.gradient, &[&canny_params, &normals, &magnitude, &sector]),
@@ -703,6 +722,9 @@ impl Gpu {
         images: bool,
     ) -> Result<ImageStages, GpuError> {
         let (w, h) = (depth.width as u32, depth.height as u32);
+        if w.max(h) > DIFFUSION_MAX_LINE {
+            return Err(GpuError::TooLarge { width: w, height: h });
+        }
         let n = w as u64 * h as u64;
         let mut lap = super::stopwatch();
         self.frame_for(w, h);
@@ -717,12 +739,11 @@ impl Gpu {
         let g = &f.groups;
         let size = [w.div_ceil(16), h.div_ceil(16)];
         let set = f.timestamps.as_ref().map(|(set, _)| set);
-        // A diffusion step: rows from depth a into b, then columns from b back into a.
+        // A diffusion step: rows from depth a into b, then columns from b back into a, a
+        // workgroup a line.
         let diffuse = self.diffusion.entry("main");
         let steps: Vec<Dispatch> = (0..diffusion_steps(cfg))
-            .flat_map(|_| {
-                [(diffuse, &g.diffusion[0], [h.div_ceil(64), 1]), (diffuse, &g.diffusion[1], [w.div_ceil(64), 1])]
-            })
+            .flat_map(|_| [(diffuse, &g.diffusion[0], [h, 1]), (diffuse, &g.diffusion[1], [w, 1])])
             .collect();
         Self::pass(&mut encoder, set, 0, &steps);
         Self::pass(&mut encoder, set, 1, &[(self.normals.entry("main"), &g.normals, size)]);
@@ -1023,6 +1044,17 @@ mod tests {
             }),
             size_of::<RansacParams>(),
         );
+    }
+
+    #[test]
+    fn the_diffusion_shader_solves_the_lines_the_rust_side_lets_through() {
+        let module = naga::front::wgsl::parse_str(DIFFUSION.source).unwrap();
+        let (_, max_line) =
+            module.constants.iter().find(|(_, c)| c.name.as_deref() == Some("MAX_LINE")).expect("MAX_LINE");
+        let naga::Expression::Literal(naga::Literal::U32(declared)) = module.global_expressions[max_line.init] else {
+            panic!("MAX_LINE is not a u32 literal")
+        };
+        assert_eq!(declared, DIFFUSION_MAX_LINE);
     }
 
     #[test]
