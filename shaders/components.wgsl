@@ -21,11 +21,17 @@ fn inside(i: u32) -> bool {
     return (mask[i] != 0u) == (p.inside_nonzero != 0u);
 }
 
+// The root of `start`, halving the path on the way (each pixel passed is hung under its
+// grandparent): a find walks the chain a merge left, and on a large region that chain
+// is long. Hanging a pixel higher in its own tree changes no root, and atomicMin never
+// undoes a union that ran meanwhile.
 fn find(start: u32) -> u32 {
     var r = start;
     var q = atomicLoad(&parent[r]);
     while (q != r) {
-        r = q;
+        let g = atomicLoad(&parent[q]);
+        if (g != q) { atomicMin(&parent[r], g); }
+        r = g;
         q = atomicLoad(&parent[r]);
     }
     return r;

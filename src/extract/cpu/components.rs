@@ -48,11 +48,16 @@ pub fn dense_from_roots(labels: &mut [u32]) -> usize {
 /// shaders/components.wgsl run one invocation at a time, pass by pass: root + 1 of each
 /// pixel's component, 0 outside. `inside` is the shader's test on the mask.
 pub fn components_oracle(w: usize, h: usize, inside: impl Fn(usize) -> bool) -> Vec<u32> {
-    fn find(parent: &[u32], start: u32) -> u32 {
+    // Halving the path as it goes, with atomicMin's writes.
+    fn find(parent: &mut [u32], start: u32) -> u32 {
         let mut r = start;
         let mut q = parent[r as usize];
         while q != r {
-            r = q;
+            let g = parent[q as usize];
+            if g != q {
+                parent[r as usize] = parent[r as usize].min(g);
+            }
+            r = g;
             q = parent[r as usize];
         }
         r
@@ -110,7 +115,7 @@ pub fn components_oracle(w: usize, h: usize, inside: impl Fn(usize) -> bool) -> 
         }
     }
     // flatten
-    (0..w * h).map(|i| if inside(i) { find(&parent, i as u32) + 1 } else { 0 }).collect()
+    (0..w * h).map(|i| if inside(i) { find(&mut parent, i as u32) + 1 } else { 0 }).collect()
 }
 
 /// shaders/hysteresis.wgsl after components.wgsl, one invocation at a time.
