@@ -51,10 +51,12 @@ pub struct StageTimes {
     pub normals: f64,
     /// Gradient, classes, hysteresis and the closed boundary.
     pub edges: f64,
-    /// Connected components of the pixels inside the boundary.
+    /// Connected components of the pixels inside the boundary, numbered (on the GPU
+    /// twin: the components' GPU time and the CPU's numbering of the roots read back).
     pub regions: f64,
-    /// GPU only: from the submit to the labels on the CPU, less the stages' GPU time
-    /// (all of it where the adapter has no timestamps, the stages then reading 0).
+    /// GPU only: from the upload to the labels on the CPU, less the stages' GPU time:
+    /// the submit, waiting, the copy and mapping (all of it where the adapter has no
+    /// timestamps, the stages then reading 0).
     pub readback: f64,
     /// Region clean-up (splits, joins, growth) and outlines.
     pub contours: f64,
@@ -306,13 +308,12 @@ pub fn extract_with(
         }
         Twin::Gpu(gpu) => {
             let out = gpu.image_stages(&depth, intr, cfg, keep_images)?;
-            let mut labels = out.regions;
-            let count = cpu::components::dense_from_roots(&mut labels.data);
-            let seg = Segmentation::from_labels(labels, count, MIN_REGION_PIXELS);
-            // Since the depth: the upload, the submit, the readback and the numbering.
+            // Since the depth: the upload, the submit and the readback.
             let ms = lap();
+            let seg = Segmentation::from_roots(&out.regions, MIN_REGION_PIXELS);
             let t = out.times;
-            [times.diffusion, times.normals, times.edges, times.regions] = [t.diffusion, t.normals, t.edges, t.regions];
+            [times.diffusion, times.normals, times.edges] = [t.diffusion, t.normals, t.edges];
+            times.regions = t.regions + lap();
             times.upload += t.upload;
             times.readback = (ms - t.upload - t.diffusion - t.normals - t.edges - t.regions).max(0.0);
             (out.images, seg, Cloud::new(&depth, intr), Some(gpu))

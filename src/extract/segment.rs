@@ -45,6 +45,39 @@ impl Segmentation {
         Segmentation::from_runs(labels.width, labels.height, label_runs(&labels.data), count, min_pixels)
     }
 
+    /// Regions from component roots, as the GPU's components.wgsl leaves them: each pixel
+    /// its component's root index + 1 (a component's root is its first pixel in scan
+    /// order), 0 outside any. The components are numbered in scan order, as
+    /// `dense_from_roots` numbers them, but run by run: a per-pixel renumbering pass was
+    /// most of the GPU twin's regions stage.
+    pub fn from_roots(roots: &Grid<u32>, min_pixels: usize) -> Segmentation {
+        thread_local! {
+            /// Each root's number, written at the root's own run (the first of its
+            /// component in the scan) and cleared after: kept between frames.
+            static NUMBER_OF_ROOT: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
+        }
+        let mut count = 0u32;
+        let runs = NUMBER_OF_ROOT.with_borrow_mut(|number| {
+            number.resize(number.len().max(roots.data.len()), 0);
+            let runs: Vec<(Range<usize>, u32)> = label_runs(&roots.data)
+                .map(|(range, root)| {
+                    let r = root as usize - 1;
+                    if r == range.start {
+                        count += 1;
+                        number[r] = count;
+                    }
+                    // A root with no run of its own (not what the shader leaves) numbers nothing.
+                    (range, number.get(r).copied().unwrap_or(0))
+                })
+                .collect();
+            for (range, _) in &runs {
+                number[range.start] = 0;
+            }
+            runs
+        });
+        Segmentation::from_runs(roots.width, roots.height, runs.into_iter(), count as usize, min_pixels)
+    }
+
     /// Regions from the runs of components 1..=count (pixel index ranges in scan order,
     /// each with its component): sizes, numbers and pixel lists taken run by run, never
     /// pixel by pixel (a count per pixel waits on the previous pixel's store to its count).
@@ -776,7 +809,32 @@ impl PlaneFit {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::extract::cpu::components::{components_oracle, dense_from_roots};
     use crate::extract::cpu::ransac::hash;
+
+    #[test]
+    fn regions_from_roots_are_the_densely_numbered_components() {
+        // Masks of random specks and blobs, the roots as the shader leaves them; twice
+        // each, so the kept numbers of the first pass must not leak into the second.
+        let (w, h) = (61, 37);
+        for seed in 0..8u32 {
+            let mask: Vec<bool> =
+                (0..w * h).map(|i| hash(i as u32 / 3 ^ seed.wrapping_mul(0x9e37_79b9)) % 100 < 25 + seed * 3).collect();
+            let roots = Grid { width: w, height: h, data: components_oracle(w, h, |i| mask[i]) };
+            let mut dense = roots.data.clone();
+            let count = dense_from_roots(&mut dense);
+            assert!(count > 5, "seed {seed}: {count} components");
+            for min_pixels in [1, 4] {
+                let want =
+                    Segmentation::from_labels(Grid { width: w, height: h, data: dense.clone() }, count, min_pixels);
+                for pass in 0..2 {
+                    let got = Segmentation::from_roots(&roots, min_pixels);
+                    assert_eq!(got.labels, want.labels, "seed {seed}, min {min_pixels}, pass {pass}: labels");
+                    assert_eq!(got.pixels, want.pixels, "seed {seed}, min {min_pixels}, pass {pass}: pixels");
+                }
+            }
+        }
+    }
 
     /// Growth's plane of one pixel, the oracle of `plane_row`: the label of the accepted region
     /// around pixel i = (u, v) whose plane is nearest to the pixel's point, within `dist` (the
