@@ -818,8 +818,9 @@ mod tests {
         // each, so the kept numbers of the first pass must not leak into the second.
         let (w, h) = (61, 37);
         for seed in 0..8u32 {
-            let mask: Vec<bool> =
-                (0..w * h).map(|i| hash(i as u32 / 3 ^ seed.wrapping_mul(0x9e37_79b9)) % 100 < 25 + seed * 3).collect();
+            let mask: Vec<bool> = (0..w * h)
+                .map(|i| hash((i as u32 / 3) ^ seed.wrapping_mul(0x9e37_79b9)) % 100 < 25 + seed * 3)
+                .collect();
             let roots = Grid { width: w, height: h, data: components_oracle(w, h, |i| mask[i]) };
             let mut dense = roots.data.clone();
             let count = dense_from_roots(&mut dense);
