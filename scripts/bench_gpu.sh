@@ -68,7 +68,7 @@ for seq in ("straight_640", "straight_320"):
             print(name, "unreadable:", e)
     if not runs:
         continue
-    order = ["upload", "diffusion", "normals", "edges", "regions", "readback", "contours", "ransac", "polygons", "total"]
+    order = ["upload", "diffusion", "normals", "edges", "regions", "readback", "contours", "ransac", "polygons", "total", "gpu_busy"]
     print(f"\n{seq} ({next(iter(runs.values()))['width']}x{next(iter(runs.values()))['height']}): ms median / p99")
     for n, r in runs.items():
         print(f"  {n}: {r['device']}, {r['frames']} frames, {r['fps']:.0f} fps end to end")

@@ -41,5 +41,6 @@ pub fn stage_spreads(times: &[StageTimes]) -> Vec<(&'static str, Spread)> {
         ("ransac", stage(|t| t.ransac)),
         ("polygons", stage(|t| t.polygons)),
         ("total", stage(|t| t.total)),
+        ("gpu_busy", stage(|t| t.gpu_busy)),
     ]
 }

@@ -105,8 +105,13 @@ fn whole_frames_give_the_same_polygons_on_both_twins() {
     for (name, seq, k) in mock_frames(5) {
         let frame = seq.depth(k).unwrap();
         let (c, _, _) = extract_cpu(&frame, &seq.intrinsics, &cfg).unwrap();
-        let (g, stages, _) = extract_gpu(&mut gpu, &frame, &seq.intrinsics, &cfg, false).unwrap();
+        let (g, stages, times) = extract_gpu(&mut gpu, &frame, &seq.intrinsics, &cfg, false).unwrap();
         assert!(stages.images.is_none(), "{name} frame {k}: images read back unasked");
+        if gpu.has_timestamps() {
+            // The submit's span holds its stages (and the gaps between them).
+            let stages = times.diffusion + times.normals + times.edges;
+            assert!(times.gpu_busy > 0.0 && times.gpu_busy >= stages * (1.0 - 1e-9), "{name} frame {k}: {times:?}");
+        }
         assert_eq!(c.polygons.len(), g.polygons.len(), "{name} frame {k}: polygon counts");
         for (a, b) in c.polygons.iter().zip(&g.polygons) {
             let angle = Vector3::from(a.normal).angle(&Vector3::from(b.normal)).to_degrees();

@@ -240,6 +240,9 @@ pub struct GpuTimes {
     pub edges: f64,
     /// Connected components of the non-boundary pixels.
     pub regions: f64,
+    /// From the first stage's start to the last one's end: the GPU's time for the
+    /// per-pixel stages, the gaps between them included.
+    pub busy: f64,
 }
 
 /// The four timed stages of the one submit, in order.
@@ -768,6 +771,7 @@ impl Gpu {
             if let Some(ticks) = stamps {
                 let ms = |k: usize| ticks[2 * k + 1].saturating_sub(ticks[2 * k]) as f64 * period_ms;
                 [times.diffusion, times.normals, times.edges, times.regions] = [ms(0), ms(1), ms(2), ms(3)];
+                times.busy = ticks[2 * TIMED_STAGES as usize - 1].saturating_sub(ticks[0]) as f64 * period_ms;
             }
             let floats = |k: usize, per: usize| bytemuck::cast_slice::<u32, f32>(&words[k * n..(k + per) * n]);
             let bytes = |k: usize| words[k * n..(k + 1) * n].iter().map(|&b| b as u8).collect::<Vec<u8>>();

@@ -63,6 +63,9 @@ pub struct StageTimes {
     pub ransac: f64,
     pub polygons: f64,
     pub total: f64,
+    /// GPU only, and where the adapter has timestamps: the GPU's time for the per-pixel
+    /// stages, from the first one's start to the last one's end (0 otherwise).
+    pub gpu_busy: f64,
 }
 
 /// What a frame went through, for the map, debug pictures and the twin comparisons.
@@ -315,6 +318,7 @@ pub fn extract_with(
             [times.diffusion, times.normals, times.edges] = [t.diffusion, t.normals, t.edges];
             times.regions = t.regions + lap();
             times.upload += t.upload;
+            times.gpu_busy = t.busy;
             times.readback = (ms - t.upload - t.diffusion - t.normals - t.edges - t.regions).max(0.0);
             (out.images, seg, Cloud::new(&depth, intr), Some(gpu))
         }
