@@ -74,6 +74,8 @@ for seq in ("straight_640", "straight_320"):
         print(f"  {n}: {r['device']}, {r['frames']} frames, {r['fps']:.0f} fps end to end")
     print(f"{'stage':>10} " + "  ".join(f"{n.removesuffix('_' + seq):>19}" for n in runs))
     for st in order:
-        cells = [f"{r['stages_ms'][st]['median']:8.3f} / {r['stages_ms'][st]['p99']:8.3f}" for r in runs.values()]
+        # An older build's JSON may lack a stage (gpu_busy came in round 34).
+        cells = [f"{r['stages_ms'][st]['median']:8.3f} / {r['stages_ms'][st]['p99']:8.3f}" if st in r['stages_ms']
+                 else f"{'-':>19}" for r in runs.values()]
         print(f"{st:>10} " + "  ".join(cells))
 EOF
