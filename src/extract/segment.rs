@@ -40,7 +40,9 @@ impl Segmentation {
     }
 
     /// Regions from component labels (1..=count, 0 outside any, numbered in scan order):
-    /// those with at least `min_pixels` pixels, renumbered in the same order.
+    /// those with at least `min_pixels` pixels, renumbered in the same order. The tests'
+    /// way in from hand-made labels; frames come through `components` or `from_roots`.
+    #[cfg(test)]
     pub fn from_labels(labels: Grid<u32>, count: usize, min_pixels: usize) -> Segmentation {
         Segmentation::from_runs(labels.width, labels.height, label_runs(&labels.data), count, min_pixels)
     }

@@ -4,8 +4,9 @@
 //! The fast loop is `grid::component_runs` (runs joined by union-find, scan-order
 //! labels). The shader labels each pixel with its component's root + 1, the root being
 //! the component's first pixel in scan order; `dense_from_roots` turns those into the
-//! fast loop's labels, so both twins hand the same labels on. The oracles mirror the
-//! shaders' passes line for line.
+//! fast loop's labels pixel by pixel (the definition; the GPU twin's frames do it run by
+//! run, `Segmentation::from_roots`), so both twins hand the same labels on. The oracles
+//! mirror the shaders' passes line for line.
 
 use crate::grid::{Grid, component_runs};
 
