@@ -11,7 +11,7 @@ use wgpu::util::DeviceExt;
 
 use super::cpu::morphology::closing_passes;
 use super::cpu::normals::{NormalPlanes, sobel_kernel};
-use super::cpu::ransac::{MAX_SCORE_POINTS, MIN_SAMPLE_SINE, PointBatch};
+use super::cpu::ransac::{PointBatch, ScoringBatch};
 use super::{Grid, Images};
 use crate::config::PipelineConfig;
 use crate::types::Intrinsics;
@@ -95,9 +95,8 @@ pub struct RansacParams {
     pub hypotheses: u32,
     pub regions: u32,
     pub inlier_distance: f32,
-    pub max_score_points: u32,
-    /// `ransac::MIN_SAMPLE_SINE`.
-    pub min_sample_sine: f32,
+    /// Scoring points in all (the length of each coordinate's plane).
+    pub points: u32,
 }
 
 /// The uniform of shaders/morphology.wgsl, field by field its `MorphologyParams`: one
@@ -198,7 +197,7 @@ pub const BOUNDARY: ShaderFile = ShaderFile {
 pub const RANSAC: ShaderFile = ShaderFile {
     name: "ransac",
     source: include_str!("../../shaders/ransac.wgsl"),
-    bindings: &[Uniform, Read, Read, ReadWrite],
+    bindings: &[Uniform, Read, Read, Read, ReadWrite],
 };
 
 /// Every shader file, for the layout test.
@@ -312,13 +311,14 @@ pub struct Gpu {
 /// two) and made again only when a batch outgrows them: a frame's batches are rewritten
 /// in place.
 struct RansacBuffers {
-    /// Points and regions they hold room for; hypotheses x regions scores.
+    /// Scoring points and regions they hold room for; hypotheses x regions planes and scores.
     points: u64,
     regions: u64,
     hypotheses: u32,
     params: wgpu::Buffer,
-    point_buffer: wgpu::Buffer,
+    coords: wgpu::Buffer,
     ranges: wgpu::Buffer,
+    planes: wgpu::Buffer,
     scores: wgpu::Buffer,
     staging: wgpu::Buffer,
     group: wgpu::BindGroup,
@@ -880,49 +880,45 @@ impl Gpu {
         if total == 0 {
             return Ok(Vec::new());
         }
-        let fits = |b: &RansacBuffers| {
-            b.points >= batch.points.len() as u64 && b.regions >= regions as u64 && b.hypotheses >= hypotheses
-        };
+        // The scoring subsets and the planes, not every point: a few hundred kB where the
+        // regions' points are megabytes.
+        let scoring = ScoringBatch::new(batch, hypotheses);
+        let points = scoring.coords.len() as u64 / 3;
+        let fits = |b: &RansacBuffers| b.points >= points && b.regions >= regions as u64 && b.hypotheses >= hypotheses;
         if !self.ransac_buffers.as_ref().is_some_and(fits) {
-            let (points, regions) = (
-                (batch.points.len() as u64).next_power_of_two().max(4096),
-                (regions as u64).next_power_of_two().max(64),
-            );
+            let (points, regions) =
+                (points.next_power_of_two().max(4096), (regions as u64).next_power_of_two().max(64));
             let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
             let params = self.uniform(bytemuck::bytes_of(&<RansacParams as bytemuck::Zeroable>::zeroed()));
-            let point_buffer = self.buffer("points", points * 12, storage);
+            let coords = self.buffer("scoring points", points * 12, storage);
             let ranges = self.buffer("ranges", regions * 8, storage);
+            let planes = self.buffer("planes", regions * hypotheses as u64 * 16, storage);
             let score_bytes = regions * hypotheses as u64 * 4;
             let scores = self.buffer("scores", score_bytes, IMAGE);
             let staging =
                 self.buffer("scores read", score_bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
-            let group = self.bind(&self.ransac, &[&params, &point_buffer, &ranges, &scores]);
+            let group = self.bind(&self.ransac, &[&params, &coords, &ranges, &planes, &scores]);
             self.ransac_buffers = Some(RansacBuffers {
                 points,
                 regions,
                 hypotheses,
                 params,
-                point_buffer,
+                coords,
                 ranges,
+                planes,
                 scores,
                 staging,
                 group,
             });
         }
         let b = self.ransac_buffers.as_ref().expect("made above");
-        let params = RansacParams {
-            hypotheses,
-            regions,
-            inlier_distance,
-            max_score_points: MAX_SCORE_POINTS as u32,
-            min_sample_sine: MIN_SAMPLE_SINE,
-        };
+        let params = RansacParams { hypotheses, regions, inlier_distance, points: points as u32 };
         self.queue.write_buffer(&b.params, 0, bytemuck::bytes_of(&params));
-        if !batch.points.is_empty() {
-            self.queue.write_buffer(&b.point_buffer, 0, bytemuck::cast_slice(&batch.points));
+        if points > 0 {
+            self.queue.write_buffer(&b.coords, 0, bytemuck::cast_slice(&scoring.coords));
         }
-        let ranges: Vec<[u32; 2]> = batch.ranges.iter().map(|r| [r.start as u32, (r.end - r.start) as u32]).collect();
-        self.queue.write_buffer(&b.ranges, 0, bytemuck::cast_slice(&ranges));
+        self.queue.write_buffer(&b.ranges, 0, bytemuck::cast_slice(&scoring.ranges));
+        self.queue.write_buffer(&b.planes, 0, bytemuck::cast_slice(&scoring.planes));
         let bytes = total as u64 * 4;
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut encoder = self.device.create_command_encoder(&Default::default());
@@ -1039,13 +1035,7 @@ mod tests {
         assert_declared_as(
             RANSAC.source,
             "RansacParams",
-            fields!(RansacParams {
-                hypotheses: u32,
-                regions: u32,
-                inlier_distance: f32,
-                max_score_points: u32,
-                min_sample_sine: f32
-            }),
+            fields!(RansacParams { hypotheses: u32, regions: u32, inlier_distance: f32, points: u32 }),
             size_of::<RansacParams>(),
         );
     }

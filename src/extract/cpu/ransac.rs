@@ -1,9 +1,10 @@
 //! Batched RANSAC plane fits for all of a frame's regions at once: the CPU twin of
-//! shaders/ransac.wgsl (the WGSL half lands with the GPU backend), then a least-squares refit on the inliers.
+//! shaders/ransac.wgsl, then a least-squares refit on the inliers.
 //!
-//! Points of every region sit in one flat array with a range per region (the layout
-//! the GPU dispatch uses). Hypothesis h of region r samples its three points with
-//! the same integer hash on both twins, and scores on the same strided subset.
+//! Points of every region sit in one flat array with a range per region. Hypothesis h
+//! of region r samples its three points with an integer hash; `ScoringBatch` gathers,
+//! once for either twin, every hypothesis's plane and each region's strided scoring
+//! subset, which the CPU scores here and the GPU twin uploads and scores in one dispatch.
 
 use std::ops::Range;
 
@@ -81,32 +82,78 @@ pub fn score_stride(n: usize) -> usize {
     n.div_ceil(MAX_SCORE_POINTS).max(1)
 }
 
-/// Inlier count of every (region, hypothesis), row-major by region: the batched stage.
-/// Each region's scoring subset is gathered once into planes of x, y and z, so that every
-/// hypothesis scores it with one contiguous, vectorised loop.
-pub fn score_hypotheses(batch: &PointBatch, hypotheses: u32, inlier_distance: f32) -> Vec<u32> {
-    let subsets: Vec<[Vec<f32>; 3]> = batch
-        .ranges
-        .par_iter()
-        .map(|range| {
-            let pts = &batch.points[range.clone()];
-            // One pass over the strided points (a pass a coordinate read each point's
-            // cache line three times).
-            let stride = score_stride(pts.len());
-            let [mut x, mut y, mut z] = [0; 3].map(|_| vec![0.0f32; pts.len().div_ceil(stride)]);
-            for (((x, y), z), p) in x.iter_mut().zip(&mut y).zip(&mut z).zip(pts.iter().step_by(stride)) {
+/// What each twin scores, gathered once: every region's scoring subset (every stride-th
+/// point) one region after another, as planes of x, y and z so that each hypothesis
+/// scores with one contiguous, vectorised loop, and every hypothesis's plane. The GPU
+/// twin uploads exactly this: a region's subset is at most `MAX_SCORE_POINTS` points, its
+/// samples are drawn from all of them.
+pub struct ScoringBatch {
+    /// x of every subset point, then y, then z.
+    pub coords: Vec<f32>,
+    /// Each region's (first point, point count) in the subsets.
+    pub ranges: Vec<[u32; 2]>,
+    /// (normal, offset) of hypothesis h of region r at r * hypotheses + h; all zero for none.
+    pub planes: Vec<[f32; 4]>,
+}
+
+impl ScoringBatch {
+    pub fn new(batch: &PointBatch, hypotheses: u32) -> ScoringBatch {
+        let counts: Vec<usize> = batch.ranges.iter().map(|r| r.len().div_ceil(score_stride(r.len()))).collect();
+        let total: usize = counts.iter().sum();
+        let mut coords = vec![0.0f32; 3 * total];
+        let (mut ranges, mut first) = (Vec::with_capacity(counts.len()), 0);
+        // Each region's three stretches of the planes, handed out in order, filled side by side.
+        let (x, yz) = coords.split_at_mut(total);
+        let (y, z) = yz.split_at_mut(total);
+        let (mut x, mut y, mut z) = (x, y, z);
+        let mut work = Vec::with_capacity(counts.len());
+        for (range, &count) in batch.ranges.iter().zip(&counts) {
+            let (xr, xs) = std::mem::take(&mut x).split_at_mut(count);
+            let (yr, ys) = std::mem::take(&mut y).split_at_mut(count);
+            let (zr, zs) = std::mem::take(&mut z).split_at_mut(count);
+            (x, y, z) = (xs, ys, zs);
+            work.push((&batch.points[range.clone()], xr, yr, zr));
+            ranges.push([first as u32, count as u32]);
+            first += count;
+        }
+        work.into_par_iter().for_each(|(pts, x, y, z)| {
+            // One pass over the strided points (a pass a coordinate read each point's cache
+            // line three times).
+            for (((x, y), z), p) in x.iter_mut().zip(y).zip(z).zip(pts.iter().step_by(score_stride(pts.len()))) {
                 [*x, *y, *z] = *p;
             }
-            [x, y, z]
-        })
-        .collect();
-    (0..batch.ranges.len() * hypotheses as usize)
-        .into_par_iter()
-        .map(|k| {
-            let (r, h) = (k / hypotheses as usize, (k % hypotheses as usize) as u32);
-            let Some((nrm, d)) = hypothesis(batch, r, h) else { return 0 };
-            let [x, y, z] = &subsets[r];
-            count_inliers(x, y, z, nrm, d, inlier_distance)
+        });
+        let planes = (0..batch.ranges.len() * hypotheses as usize)
+            .into_par_iter()
+            .map(|k| {
+                let (r, h) = (k / hypotheses as usize, (k % hypotheses as usize) as u32);
+                hypothesis(batch, r, h).map_or([0.0; 4], |(n, d)| [n[0], n[1], n[2], d])
+            })
+            .collect();
+        ScoringBatch { coords, ranges, planes }
+    }
+
+    /// The subset points of region r as planes of x, y and z.
+    fn subset(&self, r: usize) -> [&[f32]; 3] {
+        let total = self.coords.len() / 3;
+        let [first, count] = self.ranges[r].map(|v| v as usize);
+        [0, 1, 2].map(|axis| &self.coords[axis * total + first..axis * total + first + count])
+    }
+}
+
+/// Inlier count of every (region, hypothesis), row-major by region: the batched stage.
+pub fn score_hypotheses(batch: &PointBatch, hypotheses: u32, inlier_distance: f32) -> Vec<u32> {
+    let scoring = ScoringBatch::new(batch, hypotheses);
+    scoring
+        .planes
+        .par_iter()
+        .enumerate()
+        .map(|(k, &[a, b, c, d])| {
+            if [a, b, c] == [0.0; 3] {
+                return 0;
+            }
+            let [x, y, z] = scoring.subset(k / hypotheses as usize);
+            count_inliers(x, y, z, [a, b, c], d, inlier_distance)
         })
         .collect()
 }
