@@ -26,7 +26,7 @@ struct DiffusionParams {
 // SLOTS - 1 pixels: gpu::DIFFUSION_MAX_LINE. Four arrays of it are 32 KiB of workgroup
 // memory.
 const SLOTS: u32 = 2048u;
-const MAX_LINE: u32 = 2047u;
+const MAX_LINE: u32 = SLOTS - 1u;
 const THREADS: u32 = 256u;
 // Row r's coefficients of x[r - s], x[r] and x[r + s] at the current level (s = 1 at the
 // start), and its right-hand side, which becomes x[r] once solved.
@@ -56,7 +56,7 @@ fn coupling(z: f32, q: f32) -> f32 {
 
 // Solves for the change of depth (the right-hand side is the explicit fluxes), then
 // adds it.
-@compute @workgroup_size(256)
+@compute @workgroup_size(THREADS)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let n = p.len;
     if (wg.x >= p.lines || n == 0u || n > MAX_LINE) { return; }
