@@ -336,6 +336,13 @@ pub fn extract_with(
     Ok((FramePolygons { stamp_ns: frame.stamp_ns, polygons }, stages, times))
 }
 
+/// At most about this many of a region's points (every k-th pixel's) are fitted before
+/// growth: those fits only steer the leak splits, the joins and the growth, and each plane
+/// kept is fitted again on every pixel of its grown region (`refit_grown`); RANSAC scores
+/// on 2048 of them (`MAX_SCORE_POINTS`). A floor at 640x480 has a hundred thousand pixels,
+/// gathered and read twice by the refit for nothing.
+const MAX_FIT_POINTS: usize = 8192;
+
 /// What segmentation hands on: the regions, their pixels, each one's plane if it has one,
 /// and which of them meet along a crease.
 pub type Segmented = (Segmentation, Vec<Region>, Vec<Option<PlaneFit>>, Creases);
@@ -354,12 +361,12 @@ pub fn segment_and_fit(
     let dist = cfg.ransac_inlier_distance_m as f32;
     let min_ratio = cfg.ransac_min_inlier_ratio;
     let all: Vec<usize> = (0..seg.pixels.len()).collect();
-    let batch = seg.points(&all, cloud);
+    let batch = seg.sampled_points(&all, cloud, MAX_FIT_POINTS);
     times.contours = lap();
     let mut fits = fit(&batch)?;
     times.ransac = lap();
     let pieces = seg.split_leaks(&mut fits, cloud, dist, min_ratio, MIN_REGION_PIXELS);
-    let batch = seg.points(&pieces, cloud);
+    let batch = seg.sampled_points(&pieces, cloud, MAX_FIT_POINTS);
     times.contours += lap();
     if !pieces.is_empty() {
         for (r, f) in pieces.iter().zip(fit(&batch)?) {

@@ -126,11 +126,24 @@ impl Segmentation {
 
     /// Camera-frame points (raw depth, valid pixels only) of the given regions, in that order.
     pub fn points(&self, regions: &[usize], cloud: &Cloud) -> PointBatch {
-        let total = regions.iter().map(|&r| self.pixels[r].len()).sum();
+        self.sampled_points(regions, cloud, usize::MAX)
+    }
+
+    /// `points` of every stride-th pixel of a region of more than `max` pixels, the stride
+    /// the smallest that keeps it to `max`: its pixels lie on a regular grid, so the plane
+    /// through those points is the plane through all of them, to well under a percent of
+    /// its noise.
+    pub fn sampled_points(&self, regions: &[usize], cloud: &Cloud, max: usize) -> PointBatch {
+        let strides: Vec<usize> = regions.iter().map(|&r| self.pixels[r].len().div_ceil(max.max(1)).max(1)).collect();
+        let total = regions.iter().zip(&strides).map(|(&r, &k)| self.pixels[r].len().div_ceil(k)).sum();
         let mut batch = PointBatch { points: Vec::with_capacity(total), ranges: Vec::with_capacity(regions.len()) };
-        for &r in regions {
+        for (&r, &stride) in regions.iter().zip(&strides) {
             let start = batch.points.len();
-            self.extend_points(r, cloud, &mut batch.points);
+            if stride == 1 {
+                self.extend_points(r, cloud, &mut batch.points);
+            } else {
+                batch.points.extend(self.pixels[r].iter().step_by(stride).filter_map(|&i| cloud.point(i as usize)));
+            }
             batch.ranges.push(start..batch.points.len());
         }
         batch
@@ -984,6 +997,53 @@ mod tests {
                 check(false);
             }
         }
+    }
+
+    #[test]
+    fn sampled_points_are_every_stride_th_pixel_s() {
+        // Two regions side by side, one of 1200 pixels with dropouts, one of 40.
+        let (w, h) = (50usize, 30usize);
+        let intr = crate::types::Intrinsics {
+            width: w as u32,
+            height: h as u32,
+            fx: 40.0,
+            fy: 40.0,
+            cx: 25.0,
+            cy: 15.0,
+            depth_scale: 0.001,
+        };
+        let labels: Vec<u32> = (0..w * h)
+            .map(|i| {
+                if i % w < 40 {
+                    1
+                } else if i / w < 4 {
+                    2
+                } else {
+                    0
+                }
+            })
+            .collect();
+        let seg = Segmentation::from_labels(Grid { width: w, height: h, data: labels }, 2, 1);
+        let depth = Grid {
+            width: w,
+            height: h,
+            data: (0..w * h)
+                .map(|i| if hash(i as u32).is_multiple_of(9) { 0.0 } else { 1.0 + i as f32 * 1e-4 })
+                .collect(),
+        };
+        let cloud = Cloud::new(&depth, &intr);
+        let (all, sampled) = (seg.points(&[0, 1], &cloud), seg.sampled_points(&[0, 1], &cloud, 100));
+        let every = |r: usize, k: usize| -> Vec<[f32; 3]> {
+            seg.pixels[r].iter().step_by(k).filter_map(|&i| cloud.point(i as usize)).collect()
+        };
+        assert_eq!(seg.pixels[0].len(), 1200);
+        assert_eq!(all.points[all.ranges[0].clone()], every(0, 1)[..], "all of the large region");
+        // 1200 pixels to at most 100: every 12th.
+        assert_eq!(sampled.points[sampled.ranges[0].clone()], every(0, 12)[..]);
+        assert!(sampled.ranges[0].len() < 100 && sampled.ranges[0].len() > 80, "dropouts left out");
+        // The small region whole, after the large one's sample.
+        assert_eq!(sampled.points[sampled.ranges[1].clone()], every(1, 1)[..]);
+        assert_eq!(sampled.ranges[1].start, sampled.ranges[0].end);
     }
 
     #[test]
