@@ -142,7 +142,13 @@ impl Segmentation {
             if stride == 1 {
                 self.extend_points(r, cloud, &mut batch.points);
             } else {
-                batch.points.extend(self.pixels[r].iter().step_by(stride).filter_map(|&i| cloud.point(i as usize)));
+                let pixels = &self.pixels[r];
+                // An index loop: `step_by`'s fold, not inlined, took half as long again.
+                let mut k = 0;
+                while let Some(&i) = pixels.get(k) {
+                    batch.points.extend(cloud.point(i as usize));
+                    k += stride;
+                }
             }
             batch.ranges.push(start..batch.points.len());
         }
