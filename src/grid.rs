@@ -28,9 +28,7 @@ pub fn par_rows<T: Copy + Send + Sync>(
     if row_len > 0 {
         let tasks = data.spare_capacity_mut()[..n].par_chunks_mut(row_len).enumerate().with_min_len(min_rows);
         tasks.for_each(|(v, row)| {
-            for x in row.iter_mut() {
-                x.write(init);
-            }
+            row.fill(std::mem::MaybeUninit::new(init));
             // SAFETY: every value of the row was just written, and MaybeUninit<T> has T's layout.
             let row = unsafe { &mut *(row as *mut [std::mem::MaybeUninit<T>] as *mut [T]) };
             fill(v, row);

@@ -26,27 +26,63 @@ pub fn dilate(mask: &Grid<u8>, r: usize, outside: u8) -> Grid<u8> {
 /// time, so both passes vectorise). `outside` is the value of pixels beyond the border.
 fn square<const ALL: bool>(mask: &Grid<u8>, r: usize, outside: u8) -> Grid<u8> {
     let (w, h) = (mask.width, mask.height);
-    let combine = |o: &mut u8, p: u8| if ALL { *o &= p } else { *o |= p };
     let identity = u8::from(ALL);
     let mut rows = vec![identity; w * h];
     rows.par_chunks_mut(w).zip(mask.data.par_chunks(w)).with_min_len(16).for_each_init(
         || vec![outside; w + 2 * r],
         |padded, (out, src)| {
             padded[r..r + w].copy_from_slice(src);
-            for k in 0..=2 * r {
-                out.iter_mut().zip(&padded[k..k + w]).for_each(|(o, &p)| combine(o, p));
-            }
+            combine_shifted(out, padded, 2 * r + 1, ALL);
         },
     );
     let data = par_rows(w, h, identity, 16, |v, out| {
         if v < r || v + r >= h {
-            out.iter_mut().for_each(|o| combine(o, outside));
+            out.iter_mut().for_each(|o| *o = if ALL { *o & outside } else { *o | outside });
         }
-        for j in v.saturating_sub(r)..(v + r + 1).min(h) {
-            out.iter_mut().zip(&rows[j * w..(j + 1) * w]).for_each(|(o, &p)| combine(o, p));
-        }
+        let (first, end) = (v.saturating_sub(r), (v + r + 1).min(h));
+        combine_rows(out, &rows[first * w..end * w], ALL);
     });
     Grid { width: w, height: h, data }
+}
+
+super::widest_simd! {
+    /// `out` (w long) combined with `shifts` copies of `padded` shifted by 0, 1, ...: with
+    /// `all` an AND (erosion), else an OR (dilation). The square's inner loops, 64 pixels
+    /// a vector on AVX-512: at the baseline's 16 the closings and the normals' spoiled
+    /// square were 8 % of a 640x480 frame.
+    fn combine_shifted(out: &mut [u8], padded: &[u8], shifts: usize, all: bool) = combine_shifted_portable
+}
+
+super::widest_simd! {
+    /// `out` combined with each of the rows of `rows` (whole rows of out's length), as
+    /// `combine_shifted` combines.
+    fn combine_rows(out: &mut [u8], rows: &[u8], all: bool) = combine_rows_portable
+}
+
+#[inline(always)]
+fn combine_shifted_portable(out: &mut [u8], padded: &[u8], shifts: usize, all: bool) {
+    let w = out.len();
+    for k in 0..shifts {
+        combine_into(out, &padded[k..k + w], all);
+    }
+}
+
+#[inline(always)]
+fn combine_rows_portable(out: &mut [u8], rows: &[u8], all: bool) {
+    for row in rows.chunks_exact(out.len()) {
+        combine_into(out, row, all);
+    }
+}
+
+/// `out[i] &= src[i]` (`all`) or `|=`, over equal-length slices: the loop vectorises.
+#[inline(always)]
+fn combine_into(out: &mut [u8], src: &[u8], all: bool) {
+    let src = &src[..out.len()];
+    if all {
+        out.iter_mut().zip(src).for_each(|(o, &p)| *o &= p);
+    } else {
+        out.iter_mut().zip(src).for_each(|(o, &p)| *o |= p);
+    }
 }
 
 /// shaders/morphology.wgsl at pixel i: one axis of a square dilation (any) or erosion (all).
