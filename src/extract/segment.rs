@@ -907,6 +907,20 @@ mod tests {
         labels
     }
 
+    /// A w x h camera of focal length f pixels, centred, depth in millimetres.
+    fn centred_camera(w: usize, h: usize, f: f64) -> crate::types::Intrinsics {
+        let (width, height) = (w as u32, h as u32);
+        crate::types::Intrinsics {
+            width,
+            height,
+            fx: f,
+            fy: f,
+            cx: w as f64 / 2.0,
+            cy: h as f64 / 2.0,
+            depth_scale: 0.001,
+        }
+    }
+
     #[test]
     fn growth_is_the_wave_by_wave_sweep() {
         // Three planes (1/depth linear in the pixel), noisy, with dropouts; regions are the
@@ -914,15 +928,7 @@ mod tests {
         // from them, 0 to 6 waves deep, with inlier distances that take most of the band
         // or little of it.
         let (w, h) = (90usize, 70usize);
-        let intr = crate::types::Intrinsics {
-            width: w as u32,
-            height: h as u32,
-            fx: 60.0,
-            fy: 60.0,
-            cx: 45.0,
-            cy: 35.0,
-            depth_scale: 0.001,
-        };
+        let intr = centred_camera(w, h, 60.0);
         let piece = |u: usize, v: usize| {
             if v > 40 + u / 6 {
                 0
@@ -1009,15 +1015,7 @@ mod tests {
     fn sampled_points_are_every_stride_th_pixel_s() {
         // Two regions side by side, one of 1200 pixels with dropouts, one of 40.
         let (w, h) = (50usize, 30usize);
-        let intr = crate::types::Intrinsics {
-            width: w as u32,
-            height: h as u32,
-            fx: 40.0,
-            fy: 40.0,
-            cx: 25.0,
-            cy: 15.0,
-            depth_scale: 0.001,
-        };
+        let intr = centred_camera(w, h, 40.0);
         let labels: Vec<u32> = (0..w * h)
             .map(|i| {
                 if i % w < 40 {
