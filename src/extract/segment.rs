@@ -18,7 +18,7 @@ use rayon::prelude::*;
 
 use super::Grid;
 use super::cloud::Cloud;
-use super::cpu::ransac::{PlaneFit, PointBatch, refit, support};
+use super::cpu::ransac::{PlaneFit, PointBatch, refit, sample_stride, support};
 use crate::grid::{component_runs, first_other, flood, for_each_set, leading, par_rows, runs};
 
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
@@ -134,11 +134,11 @@ impl Segmentation {
     /// through those points is the plane through all of them, to well under a percent of
     /// its noise.
     pub fn sampled_points(&self, regions: &[usize], cloud: &Cloud, max: usize) -> PointBatch {
-        let strides: Vec<usize> = regions.iter().map(|&r| self.pixels[r].len().div_ceil(max.max(1)).max(1)).collect();
-        let total = regions.iter().zip(&strides).map(|(&r, &k)| self.pixels[r].len().div_ceil(k)).sum();
+        let stride = |r: usize| sample_stride(self.pixels[r].len(), max);
+        let total = regions.iter().map(|&r| self.pixels[r].len().div_ceil(stride(r))).sum();
         let mut batch = PointBatch { points: Vec::with_capacity(total), ranges: Vec::with_capacity(regions.len()) };
-        for (&r, &stride) in regions.iter().zip(&strides) {
-            let start = batch.points.len();
+        for &r in regions {
+            let (start, stride) = (batch.points.len(), stride(r));
             if stride == 1 {
                 self.extend_points(r, cloud, &mut batch.points);
             } else {

@@ -15,6 +15,7 @@
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
+use super::cpu::ransac::sample_stride;
 use super::{Polygon, VertexKind};
 use crate::ring::clip_tagged_ring;
 
@@ -58,7 +59,7 @@ pub fn trim_at_neighbour_planes(
                 continue;
             }
             let pts = &points[a];
-            let stride = pts.len().div_ceil(MAX_STRAY_POINTS).max(1);
+            let stride = sample_stride(pts.len(), MAX_STRAY_POINTS);
             let (counted, strays) = (pts.len().div_ceil(stride), count_beyond(pts, stride, n.into(), d, side, dist));
             if pts.is_empty() || strays as f64 > STRAY_SHARE * counted as f64 {
                 tracing::debug!(

@@ -15,7 +15,7 @@
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::cpu::ransac::PlaneFit;
+use super::cpu::ransac::{PlaneFit, sample_stride};
 
 /// The covariance of a fitted plane: its normal tilts by (a1, a2) rad towards `axes[0]`
 /// and `axes[1]`, and it shifts by `shift` m along the normal at `centre`; `cov` is the
@@ -165,7 +165,7 @@ pub fn plane_uncertainty(points: &[[f32; 3]], fit: &PlaneFit, dist: f64) -> Opti
     let [e1, e2] = in_plane_axes(&n)?;
     // A large region's sums are those of every k-th point times k, to well under a percent
     // (its points lie on a regular pixel grid): the covariance costs the same for any size.
-    let stride = points.len().div_ceil(MAX_POINTS).max(1);
+    let stride = sample_stride(points.len(), MAX_POINTS);
     // One pass: a_i = (x, y, -1) with x, y the lever arms along e1, e2, taken from the
     // plane's foot of the camera for now and moved to the inliers' centroid after; H and
     // M from sums of x^2, xy, y^2, x, y, 1, plain and weighted by each point's g^2.
@@ -367,7 +367,7 @@ impl HalvesAgreement {
 /// halves disagree by many sigmas. None when a half has too few points to fix a plane
 /// (the support is too narrow to test, or to trust).
 pub fn halves_agreement(points: &[[f32; 3]], fit: &PlaneFit, dist: f64) -> Option<HalvesAgreement> {
-    let stride = points.len().div_ceil(MAX_POINTS).max(1);
+    let stride = sample_stride(points.len(), MAX_POINTS);
     let v = |p: &[f32; 3]| [p[0] as f64, p[1] as f64, p[2] as f64];
     // Every stride-th point's inliers and their sum, in one plain indexed loop (a `step_by`
     // iterator collected into a growing Vec was a third of this function's time).

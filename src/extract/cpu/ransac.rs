@@ -76,10 +76,18 @@ pub fn plane_through(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> Option<([f32; 3],
     Some((n, -(n[0] * a[0] + n[1] * a[1] + n[2] * a[2])))
 }
 
+/// The smallest stride that takes at most `max` of `len` points (every stride-th): how
+/// the scoring, the first fits, a cut's stray count and the plane covariances sample a
+/// large region's points, which lie on a regular pixel grid.
+#[inline]
+pub fn sample_stride(len: usize, max: usize) -> usize {
+    len.div_ceil(max.max(1)).max(1)
+}
+
 /// Scoring stride for a region of n points.
 #[inline]
 pub fn score_stride(n: usize) -> usize {
-    n.div_ceil(MAX_SCORE_POINTS).max(1)
+    sample_stride(n, MAX_SCORE_POINTS)
 }
 
 /// What each twin scores, gathered once: every region's scoring subset (every stride-th
