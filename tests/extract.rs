@@ -814,7 +814,7 @@ fn a_plane_s_reported_covariance_is_the_spread_of_its_fits_over_noisy_draws() {
             })
             .collect();
         let fit = ransac::refit(&pts, [n.x as f32, n.y as f32, n.z as f32], d as f32, 0.05).unwrap();
-        let u = plane_uncertainty(&pts, &fit, 0.05).expect("a block of points fixes a plane");
+        let u = plane_uncertainty(&pts, 1, &fit, 0.05).expect("a block of points fixes a plane");
         errors.push(u.error_of(&n, d));
         reported.push(nalgebra::Matrix3::from_fn(|r, c| u.cov[r][c]));
     }
@@ -861,7 +861,7 @@ fn the_same_pixels_three_times_further_give_the_same_tilt_and_three_times_the_of
             })
             .collect();
         let fit = ransac::refit(&pts, [n.x as f32, n.y as f32, n.z as f32], d as f32, 0.05).unwrap();
-        let u = plane_uncertainty(&pts, &fit, 0.05).unwrap();
+        let u = plane_uncertainty(&pts, 1, &fit, 0.05).unwrap();
         (u.tilt_sigma_rad(), u.offset_sigma_m())
     };
     // The scale comes from the residuals: these grow with the depth (0.2 % steps).
@@ -871,6 +871,40 @@ fn the_same_pixels_three_times_further_give_the_same_tilt_and_three_times_the_of
     let (near, far) = (sigma(facing, 1.0), sigma(facing, 3.0));
     assert!(far.1 > 2.5 * near.1, "near {near:?}, far {far:?}");
     assert!((far.0 / near.0 - 1.0).abs() < 0.1, "near {near:?}, far {far:?}");
+}
+
+#[test]
+fn a_sample_of_every_k_th_point_stands_for_all_of_them() {
+    use polymap::extract::segment::PointSample;
+    use polymap::extract::uncertainty::plane_uncertainty;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    // A 200 x 150 pixel patch of floor 1.5 m ahead, 2 mm of noise along the rays: 30 000
+    // points, sampled to at most 2048 (every 15th), as a grown region hands them on.
+    let i = intr(320, 240);
+    let (n, d) = (Vector3::new(0.0, -0.8, -0.6).normalize(), 1.5);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    let noise = Normal::new(0.0, 0.002).unwrap();
+    let pts: Vec<[f32; 3]> = (60..210)
+        .flat_map(|v| (60..260).map(move |u| (u, v)))
+        .map(|(u, v)| {
+            let ray = i.ray(u as f64, v as f64);
+            let p = ray * (-d / n.dot(&ray)) * (1.0 + noise.sample(&mut rng));
+            [p.x as f32, p.y as f32, p.z as f32]
+        })
+        .collect();
+    let sample = PointSample::of(&pts, 2048);
+    assert_eq!(sample.stride, 15);
+    assert_eq!(sample.points, pts.iter().step_by(15).copied().collect::<Vec<_>>(), "every 15th point, in order");
+    let fit = ransac::refit(&pts, [n.x as f32, n.y as f32, n.z as f32], d as f32, 0.05).unwrap();
+    let all = plane_uncertainty(&pts, 1, &fit, 0.05).unwrap();
+    let sampled = plane_uncertainty(&sample.points, sample.stride, &fit, 0.05).unwrap();
+    // Unweighted, the sample's sigmas would be sqrt(15) = 3.9 times all the points'.
+    for (s, a) in [(sampled.tilt_sigma_rad(), all.tilt_sigma_rad()), (sampled.offset_sigma_m(), all.offset_sigma_m())] {
+        assert!((s / a - 1.0).abs() < 0.1, "sample {s:e} vs all {a:e}");
+    }
+    let small = PointSample::of(&pts[..1000], 2048);
+    assert_eq!((small.stride, small.points.len()), (1, 1000), "a small region whole");
 }
 
 #[test]

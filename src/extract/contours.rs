@@ -13,7 +13,7 @@ use std::ops::Range;
 use imageproc::point::Point;
 use rayon::prelude::*;
 
-use super::segment::Segmentation;
+use super::segment::{PointSample, Segmentation};
 use crate::grid::runs;
 
 /// One region: its component label, outline and holes (pixel centres, simplified).
@@ -23,8 +23,9 @@ pub struct Region {
     pub outer: Vec<[f32; 2]>,
     pub holes: Vec<Vec<[f32; 2]>>,
     pub pixels: usize,
-    /// The camera-frame points of its pixels (valid ones), for regions that are outlined.
-    pub points: Vec<[f32; 3]>,
+    /// A sample of the camera-frame points of its valid pixels, for regions that are
+    /// outlined (none for the others).
+    pub points: PointSample,
 }
 
 /// The outline and holes of every region r of `seg` with `wanted[r]` (the others are left
@@ -39,8 +40,13 @@ pub fn trace(seg: &Segmentation, simplify_px: f64, wanted: &[bool]) -> Vec<Regio
         .enumerate()
         .map(|(r, pixels)| {
             let label = r as u32 + 1;
-            let mut region =
-                Region { label, outer: Vec::new(), holes: Vec::new(), pixels: pixels.len(), points: Vec::new() };
+            let mut region = Region {
+                label,
+                outer: Vec::new(),
+                holes: Vec::new(),
+                pixels: pixels.len(),
+                points: PointSample::default(),
+            };
             if pixels.is_empty() || !wanted[r] {
                 return region;
             }

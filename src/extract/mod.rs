@@ -29,7 +29,7 @@ use cloud::Cloud;
 use contours::Region;
 use cpu::ransac::{PlaneFit, PointBatch};
 pub use polygon::{FramePolygons, Polygon, VertexKind, build_polygons};
-use segment::{Creases, Segmentation};
+use segment::{Creases, MAX_SAMPLE_POINTS, PointSample, Segmentation};
 
 /// Why a frame could not be processed.
 #[derive(Debug, thiserror::Error)]
@@ -397,8 +397,8 @@ pub fn segment_and_fit(
     Ok((seg, regions, fits, creases))
 }
 
-/// Fits each accepted region's plane again on its grown pixels, and hands back those
-/// pixels' points (none for the other regions). Growth gives a region back the band along
+/// Fits each accepted region's plane again on its grown pixels, and hands back a sample
+/// of those pixels' points for the polygon checks (none for the other regions). Growth gives a region back the band along
 /// its border that edges and closing ate; for a thin strip (a tread cut by the image's
 /// edge, ten rows tall) that band doubles its support across, and the plane fitted without
 /// it can be tilted by a degree.
@@ -409,14 +409,15 @@ fn refit_grown(
     cloud: &Cloud,
     dist: f32,
     min_ratio: f64,
-) -> Vec<Vec<[f32; 3]>> {
+) -> Vec<PointSample> {
     use rayon::prelude::*;
-    let refits: Vec<(Option<PlaneFit>, Vec<[f32; 3]>)> = (0..fits.len())
+    let refits: Vec<(Option<PlaneFit>, PointSample)> = (0..fits.len())
         .into_par_iter()
         .map(|r| {
-            let Some(f) = fits[r].filter(|_| accepted[r]) else { return (None, Vec::new()) };
+            let Some(f) = fits[r].filter(|_| accepted[r]) else { return (None, PointSample::default()) };
             let points = seg.points_of(r, cloud);
-            (cpu::ransac::refit(&points, f.normal_f32(), f.offset as f32, dist), points)
+            let refit = cpu::ransac::refit(&points, f.normal_f32(), f.offset as f32, dist);
+            (refit, PointSample::of(&points, MAX_SAMPLE_POINTS))
         })
         .collect();
     refits

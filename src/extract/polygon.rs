@@ -112,7 +112,8 @@ pub fn build_polygons(
     cfg: &PipelineConfig,
 ) -> Vec<Polygon> {
     let mut out = Vec::new();
-    let mut points = Vec::new();
+    // Each polygon's region's sample of points.
+    let mut samples = Vec::new();
     // Each polygon's region label and plane fit.
     let mut labels = Vec::new();
     let mut plane_fits = Vec::new();
@@ -166,12 +167,13 @@ pub fn build_polygons(
             // Known once the polygon is kept (below): most regions are not.
             uncertainty: PlaneUncertainty::default(),
         });
-        points.push(region.points.as_slice());
+        samples.push(&region.points);
         plane_fits.push(*fit);
         labels.push(region.label);
     }
     let meet = |a: usize, b: usize| creases.meet(labels[a], labels[b]);
-    trim::trim_at_neighbour_planes(&mut out, &points, meet, cfg.ransac_inlier_distance_m);
+    let sample_points: Vec<&[[f32; 3]]> = samples.iter().map(|s| s.points.as_slice()).collect();
+    trim::trim_at_neighbour_planes(&mut out, &sample_points, meet, cfg.ransac_inlier_distance_m);
     for p in &mut out {
         let n = Vector3::from(p.normal);
         // Holes smaller than a region worth keeping are sensor dropouts, not surface gaps.
@@ -188,13 +190,13 @@ pub fn build_polygons(
     let keep: Vec<bool> = out
         .par_iter_mut()
         .zip(plane_fits.par_iter())
-        .zip(points.par_iter())
-        .map(|((p, fit), pts)| {
+        .zip(samples.par_iter())
+        .map(|((p, fit), sample)| {
             if p.area < cfg.min_polygon_area_m2 {
                 return false;
             }
             let dist = cfg.ransac_inlier_distance_m;
-            match plane_uncertainty(pts, fit, dist) {
+            match plane_uncertainty(&sample.points, sample.stride, fit, dist) {
                 Some(u) if u.tilt_sigma_rad() > MAX_TILT_SIGMA_DEG.to_radians() => {
                     tracing::debug!(
                         "polygon of {} px held back: its normal is known to {:.2} deg only",
@@ -203,7 +205,7 @@ pub fn build_polygons(
                     );
                     false
                 }
-                Some(u) => match halves_agreement(pts, fit, dist) {
+                Some(u) => match halves_agreement(&sample.points, fit, dist) {
                     Some(h) if h.one_surface(MAX_HALVES_BEND_DEG.to_radians()) => {
                         p.uncertainty = u;
                         true

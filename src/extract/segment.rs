@@ -21,6 +21,37 @@ use super::cloud::Cloud;
 use super::cpu::ransac::{PlaneFit, PointBatch, refit, sample_stride, support};
 use crate::grid::{component_runs, first_other, flood, for_each_set, leading, par_rows, runs};
 
+/// Every `stride`-th of a region's valid points, in scan order, each standing for
+/// `stride` of them: what the polygon checks read (a plane's covariance and its halves, a
+/// cut's strays). A region's pixels lie on a regular grid, so every k-th point's sums are
+/// those of all of them, times k, to well under a percent.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PointSample {
+    pub points: Vec<[f32; 3]>,
+    pub stride: usize,
+}
+
+/// At most about this many of a region's points are sampled (`PointSample`): a floor at
+/// 640x480 has a hundred thousand, and the checks cost the same for any size.
+pub const MAX_SAMPLE_POINTS: usize = 2048;
+
+impl PointSample {
+    /// Every stride-th of `points`, the stride the smallest that keeps them to `max`.
+    pub fn of(points: &[[f32; 3]], max: usize) -> PointSample {
+        let stride = sample_stride(points.len(), max);
+        if stride == 1 {
+            return PointSample { points: points.to_vec(), stride };
+        }
+        // An index loop: `step_by`'s fold was not inlined.
+        let (mut sample, mut i) = (Vec::with_capacity(points.len().div_ceil(stride)), 0);
+        while let Some(p) = points.get(i) {
+            sample.push(*p);
+            i += stride;
+        }
+        PointSample { points: sample, stride }
+    }
+}
+
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
 #[derive(Clone, Debug)]
 pub struct Segmentation {

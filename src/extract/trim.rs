@@ -15,7 +15,6 @@
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
-use super::cpu::ransac::sample_stride;
 use super::{Polygon, VertexKind};
 use crate::ring::clip_tagged_ring;
 
@@ -26,14 +25,10 @@ const PARALLEL_COS: f64 = 0.985;
 /// plane still bounds it (noise and the odd mixed pixel).
 const STRAY_SHARE: f64 = 0.005;
 
-/// At most about this many of a polygon's points, evenly strided, are counted for that
-/// share: a floor at 640x480 has a hundred thousand, counted again for every plane that
-/// crosses it (the largest pass of the polygons at that size), and its points lie on a
-/// regular pixel grid, so every k-th point's share is the share of them all.
-const MAX_STRAY_POINTS: usize = 2048;
-
 /// Cuts every polygon at the planes of the others that meet it and bound it.
-/// `points[k]` are the camera-frame points of polygon k's region, `meet(a, b)` whether
+/// `points[k]` are a sample of the camera-frame points of polygon k's region (a
+/// `PointSample`: a floor's hundred thousand at 640x480 would be counted again for every
+/// plane that crosses it, and every k-th point's share is the share of them all), `meet(a, b)` whether
 /// polygons a and b meet along a crease; `dist` is the inlier distance, m.
 pub fn trim_at_neighbour_planes(
     polygons: &mut [Polygon],
@@ -58,9 +53,8 @@ pub fn trim_at_neighbour_planes(
                 tracing::debug!("polygon {a} crosses the plane of polygon {b}, which it does not meet: not cut");
                 continue;
             }
-            let pts = &points[a];
-            let stride = sample_stride(pts.len(), MAX_STRAY_POINTS);
-            let (counted, strays) = (pts.len().div_ceil(stride), count_beyond(pts, stride, n.into(), d, side, dist));
+            let pts = points[a];
+            let (counted, strays) = (pts.len(), count_beyond(pts, n.into(), d, side, dist));
             if pts.is_empty() || strays as f64 > STRAY_SHARE * counted as f64 {
                 tracing::debug!(
                     "polygon {a} crosses the plane of polygon {b}: {strays} of {counted} points counted beyond it"
@@ -87,24 +81,14 @@ pub fn trim_at_neighbour_planes(
 }
 
 crate::extract::cpu::widest_simd! {
-    /// How many of every `stride`-th point lie more than `dist` beyond the plane (n, d) from
-    /// the `side` (1 or -1) a polygon is on: a cut's strays.
-    fn count_beyond(points: &[[f32; 3]], stride: usize, n: [f64; 3], d: f64, side: f64, dist: f64) -> usize = count_beyond_portable
+    /// How many of `points` lie more than `dist` beyond the plane (n, d) from the `side`
+    /// (1 or -1) a polygon is on: a cut's strays.
+    fn count_beyond(points: &[[f32; 3]], n: [f64; 3], d: f64, side: f64, dist: f64) -> usize = count_beyond_portable
 }
 
 #[inline(always)]
-fn count_beyond_portable(points: &[[f32; 3]], stride: usize, n: [f64; 3], d: f64, side: f64, dist: f64) -> usize {
-    // A small region's points all, in the loop that vectorises.
-    if stride == 1 {
-        return points.iter().map(|p| beyond(p, n, d, side, dist)).sum();
-    }
-    // An index loop: `step_by`'s fold was not inlined, and cost as much as the count.
-    let (mut count, mut i) = (0, 0);
-    while let Some(p) = points.get(i) {
-        count += beyond(p, n, d, side, dist);
-        i += stride;
-    }
-    count
+fn count_beyond_portable(points: &[[f32; 3]], n: [f64; 3], d: f64, side: f64, dist: f64) -> usize {
+    points.iter().map(|p| beyond(p, n, d, side, dist)).sum()
 }
 
 /// Whether `side * (n . p + d) < -dist`, written out (as `f` in `trim_at_neighbour_planes`
@@ -119,18 +103,14 @@ mod tests {
     use super::*;
 
     #[test]
-    fn strays_are_counted_over_every_stride_th_point() {
+    fn strays_are_the_points_beyond_the_plane_from_the_polygon_s_side() {
         // A 100 x 100 grid of points at z = 1, and the plane x = 0.3 facing -x: the points
         // with x > 0.3 + dist lie beyond it from side 1.
         let points: Vec<[f32; 3]> =
             (0..10_000).map(|i| [(i % 100) as f32 / 100.0, (i / 100) as f32 / 100.0, 1.0]).collect();
         let (n, d, dist) = ([-1.0, 0.0, 0.0], 0.3, 0.005);
-        let oracle = |stride: usize| points.iter().step_by(stride).filter(|p| -(p[0] as f64) + d < -dist).count();
-        for stride in [1, 2, 3, 7, 64] {
-            assert_eq!(count_beyond(&points, stride, n, d, 1.0, dist), oracle(stride), "stride {stride}");
-        }
-        assert_eq!(oracle(1), 69 * 100, "x = 0.31 ..= 0.99 beyond");
-        assert_ne!(oracle(7), oracle(1), "a stride counts fewer");
-        assert_eq!(count_beyond(&points, 1, n, d, -1.0, dist), 30 * 100, "x = 0 ..= 0.29 beyond from the other side");
+        assert_eq!(count_beyond(&points, n, d, 1.0, dist), 69 * 100, "x = 0.31 ..= 0.99 beyond");
+        assert_eq!(count_beyond(&points[..150], n, d, 1.0, dist), 69 + 19, "a vector's tail counted too");
+        assert_eq!(count_beyond(&points, n, d, -1.0, dist), 30 * 100, "x = 0 ..= 0.29 beyond from the other side");
     }
 }

@@ -15,7 +15,7 @@
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::cpu::ransac::{PlaneFit, sample_stride};
+use super::cpu::ransac::PlaneFit;
 
 /// The covariance of a fitted plane: its normal tilts by (a1, a2) rad towards `axes[0]`
 /// and `axes[1]`, and it shifts by `shift` m along the normal at `centre`; `cov` is the
@@ -159,19 +159,19 @@ pub fn in_plane_axes(n: &Vector3<f64>) -> Option<[Vector3<f64>; 2]> {
 }
 
 /// The uncertainty of `fit` from the points within `dist` of its plane; None with too few
-/// of them to fix a plane (fewer than 4, or all on a line).
-pub fn plane_uncertainty(points: &[[f32; 3]], fit: &PlaneFit, dist: f64) -> Option<PlaneUncertainty> {
+/// of them to fix a plane (fewer than 4, or all on a line). `points` are every
+/// `stride`-th of the plane's points (1: all of them; a region's `PointSample`), each
+/// standing for `stride`: its pixels lie on a regular grid, so the sums of every k-th
+/// point times k are those of all, to well under a percent, at the same cost for any size.
+pub fn plane_uncertainty(points: &[[f32; 3]], stride: usize, fit: &PlaneFit, dist: f64) -> Option<PlaneUncertainty> {
     let n = fit.normal;
     let [e1, e2] = in_plane_axes(&n)?;
-    // A large region's sums are those of every k-th point times k, to well under a percent
-    // (its points lie on a regular pixel grid): the covariance costs the same for any size.
-    let stride = sample_stride(points.len(), MAX_POINTS);
     // One pass: a_i = (x, y, -1) with x, y the lever arms along e1, e2, taken from the
     // plane's foot of the camera for now and moved to the inliers' centroid after; H and
     // M from sums of x^2, xy, y^2, x, y, 1, plain and weighted by each point's g^2.
     let foot = -n * fit.offset;
     let frame = PlaneFrame { n: n.into(), offset: fit.offset, foot: foot.into(), axes: [e1.into(), e2.into()], dist };
-    let sums = frame.inlier_sums(points, stride);
+    let sums = frame.inlier_sums(points);
     let (h, m, count, sum) = (sums.plain, sums.weighted, sums.count as usize, Vector3::from(sums.sum));
     if count < 4 {
         return None;
@@ -225,24 +225,24 @@ struct InlierSums {
 }
 
 impl PlaneFrame {
-    /// The sums over every `stride`-th point: on x86-64 four points at a time in AVX2, the
-    /// last ones (and all, elsewhere) by `inlier_sums_scalar`, the AVX2 pass's oracle.
-    fn inlier_sums(&self, points: &[[f32; 3]], stride: usize) -> InlierSums {
+    /// The sums over the points: on x86-64 four at a time in AVX2, the last ones (and all,
+    /// elsewhere) by `inlier_sums_scalar`, the AVX2 pass's oracle.
+    fn inlier_sums(&self, points: &[[f32; 3]]) -> InlierSums {
         #[cfg(target_arch = "x86_64")]
         if super::cpu::simd::level() >= super::cpu::simd::Level::Avx2 {
-            let quads = points.len().div_ceil(stride) / 4;
+            let quads = points.len() / 4;
             // SAFETY: the CPU has AVX2 and FMA (`Level::Avx2`), checked just above.
-            let fast = unsafe { avx2::inlier_sums(self, points, stride, quads) };
-            let rest = self.inlier_sums_scalar(&points[(quads * 4 * stride).min(points.len())..], stride);
+            let fast = unsafe { avx2::inlier_sums(self, &points[..quads * 4]) };
+            let rest = self.inlier_sums_scalar(&points[quads * 4..]);
             return fast.plus(&rest);
         }
-        self.inlier_sums_scalar(points, stride)
+        self.inlier_sums_scalar(points)
     }
 
-    fn inlier_sums_scalar(&self, points: &[[f32; 3]], stride: usize) -> InlierSums {
+    fn inlier_sums_scalar(&self, points: &[[f32; 3]]) -> InlierSums {
         let (n, foot, [e1, e2]) = (Vector3::from(self.n), Vector3::from(self.foot), self.axes.map(Vector3::from));
         let mut s = InlierSums::default();
-        for p in points.iter().step_by(stride) {
+        for p in points {
             let p = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
             let r = n.dot(&p) + self.offset;
             if r.abs() >= self.dist {
@@ -285,12 +285,12 @@ mod avx2 {
     use super::{InlierSums, PlaneFrame};
     use crate::extract::cpu::simd::lane_sum;
 
-    /// The sums over the first `quads` groups of four of every `stride`-th point.
+    /// The sums over a multiple of four points.
     ///
     /// # Safety
     /// The CPU has AVX2 and FMA.
     #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn inlier_sums(f: &PlaneFrame, points: &[[f32; 3]], stride: usize, quads: usize) -> InlierSums {
+    pub(super) unsafe fn inlier_sums(f: &PlaneFrame, points: &[[f32; 3]]) -> InlierSums {
         let splat = |v: [f64; 3]| v.map(|c| _mm256_set1_pd(c));
         let ([nx, ny, nz], [fx, fy, fz], [ax, ay, az], [bx, by, bz]) =
             (splat(f.n), splat(f.foot), splat(f.axes[0]), splat(f.axes[1]));
@@ -302,8 +302,7 @@ mod avx2 {
         };
         let zero = _mm256_setzero_pd();
         let (mut count, mut scale, mut sum, mut plain, mut weighted) = (zero, zero, [zero; 3], [zero; 6], [zero; 6]);
-        for k in 0..quads {
-            let p: [&[f32; 3]; 4] = std::array::from_fn(|l| &points[(4 * k + l) * stride]);
+        for p in points.chunks_exact(4) {
             let [x, y, z] =
                 [0, 1, 2].map(|c| _mm256_setr_pd(p[0][c] as f64, p[1][c] as f64, p[2][c] as f64, p[3][c] as f64));
             let np = dot(x, y, z, nx, ny, nz);
@@ -340,9 +339,6 @@ mod avx2 {
     }
 }
 
-/// The most points the covariance sums run over (see `plane_uncertainty`).
-const MAX_POINTS: usize = 2048;
-
 /// How two halves of a plane's inliers agree, when cut across their narrowest in-plane
 /// direction: the angle between the planes fitted to each half, and the standard deviation
 /// that angle has when both halves are one plane with noise (their tilt sigmas combined).
@@ -367,20 +363,14 @@ impl HalvesAgreement {
 /// halves disagree by many sigmas. None when a half has too few points to fix a plane
 /// (the support is too narrow to test, or to trust).
 pub fn halves_agreement(points: &[[f32; 3]], fit: &PlaneFit, dist: f64) -> Option<HalvesAgreement> {
-    let stride = sample_stride(points.len(), MAX_POINTS);
     let v = |p: &[f32; 3]| [p[0] as f64, p[1] as f64, p[2] as f64];
-    // Every stride-th point's inliers and their sum, in one plain indexed loop (a `step_by`
-    // iterator collected into a growing Vec was a third of this function's time).
-    let mut inliers: Vec<[f32; 3]> = Vec::with_capacity(points.len().div_ceil(stride));
+    // The inliers and their sum.
+    let mut inliers: Vec<[f32; 3]> = Vec::with_capacity(points.len());
     let mut sum = [0.0f64; 3];
-    let mut i = 0;
-    while let Some(p) = points.get(i) {
-        if fit.distance(p) < dist {
-            inliers.push(*p);
-            let q = v(p);
-            sum = [sum[0] + q[0], sum[1] + q[1], sum[2] + q[2]];
-        }
-        i += stride;
+    for p in points.iter().filter(|p| fit.distance(p) < dist) {
+        inliers.push(*p);
+        let q = v(p);
+        sum = [sum[0] + q[0], sum[1] + q[1], sum[2] + q[2]];
     }
     let count = inliers.len().max(1) as f64;
     let c = [sum[0] / count, sum[1] / count, sum[2] / count];
@@ -408,7 +398,7 @@ pub fn halves_agreement(points: &[[f32; 3]], fit: &PlaneFit, dist: f64) -> Optio
     }
     let half = |pts: &[[f32; 3]]| {
         let f = super::cpu::ransac::refit(pts, fit.normal_f32(), fit.offset as f32, dist as f32)?;
-        Some((f.normal, plane_uncertainty(pts, &f, dist)?.tilt_sigma_rad()))
+        Some((f.normal, plane_uncertainty(pts, 1, &f, dist)?.tilt_sigma_rad()))
     };
     let ((na, sa), (nb, sb)) = (half(&halves[0])?, half(&halves[1])?);
     Some(HalvesAgreement { angle_rad: na.dot(&nb).clamp(-1.0, 1.0).acos(), sigma_rad: sa.hypot(sb) })
@@ -426,7 +416,7 @@ mod tests {
         let (offset, dist) = (1.4, 0.01);
         let [e1, e2] = in_plane_axes(&n).expect("a unit normal");
         let frame = PlaneFrame { n: n.into(), offset, foot: (-n * offset).into(), axes: [e1.into(), e2.into()], dist };
-        for (size, stride) in [(0usize, 1usize), (3, 1), (4, 1), (9, 1), (9, 2), (1000, 1), (1001, 3), (20_000, 7)] {
+        for size in [0usize, 3, 4, 9, 1000, 1001, 1003] {
             // On the plane within 3 mm, every fourth point 5 cm off it.
             let points: Vec<[f32; 3]> = (0..size)
                 .map(|i| {
@@ -435,14 +425,16 @@ mod tests {
                     [p.x as f32, p.y as f32, p.z as f32]
                 })
                 .collect();
-            let (fast, slow) = (frame.inlier_sums(&points, stride), frame.inlier_sums_scalar(&points, stride));
-            assert_eq!(fast.count, slow.count, "size {size} stride {stride}: the same inliers");
+            let (fast, slow) = (frame.inlier_sums(&points), frame.inlier_sums_scalar(&points));
+            assert_eq!(fast.count, slow.count, "size {size}: the same inliers");
             let all = |s: &InlierSums| [&s.sum[..], &[s.scale], &s.plain, &s.weighted].concat();
             for (a, b) in all(&fast).iter().zip(all(&slow)) {
-                assert!((a - b).abs() <= 1e-12 * (1.0 + b.abs()), "size {size} stride {stride}: {a} vs {b}");
+                assert!((a - b).abs() <= 1e-12 * (1.0 + b.abs()), "size {size}: {a} vs {b}");
             }
-            let scored = size.div_ceil(stride) as f64;
-            assert!(size < 100 || (slow.count > 0.6 * scored && slow.count < 0.9 * scored), "outliers left out");
+            assert!(
+                size < 100 || (slow.count > 0.6 * size as f64 && slow.count < 0.9 * size as f64),
+                "outliers left out"
+            );
         }
     }
 }
