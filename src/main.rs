@@ -686,8 +686,10 @@ fn bench(s: &Sequence, config: &Config, frames: usize, json: bool) -> Result<()>
     let (w, h) = (s.intrinsics.width, s.intrinsics.height);
     let fps = frames as f64 / wall;
     if json {
-        let per_stage: serde_json::Map<String, serde_json::Value> =
-            stages.iter().map(|(n, sp)| (n.to_string(), serde_json::to_value(sp).expect("plain numbers"))).collect();
+        let per_stage: serde_json::Map<String, serde_json::Value> = stages
+            .iter()
+            .map(|(stage, sp)| (stage.name().to_string(), serde_json::to_value(sp).expect("plain numbers")))
+            .collect();
         println!(
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({
@@ -700,11 +702,11 @@ fn bench(s: &Sequence, config: &Config, frames: usize, json: bool) -> Result<()>
     }
     println!("{}: {frames} frames {w}x{h}, backend {} on {device}", s.dir.display(), extractor.backend());
     println!("{:>10} {:>10} {:>10}", "stage", "median ms", "p99 ms");
-    for (name, sp) in &stages {
-        if *name == "gpu_busy" && extractor.backend() == "cpu" {
+    for (stage, sp) in &stages {
+        if stage.gpu_only() && extractor.backend() == Backend::Cpu {
             continue;
         }
-        println!("{name:>10} {:>10.3} {:>10.3}", sp.median, sp.p99);
+        println!("{:>10} {:>10.3} {:>10.3}", stage.name(), sp.median, sp.p99);
     }
     println!("{fps:.1} frames per second end to end");
     Ok(())

@@ -159,11 +159,11 @@ impl Extractor {
         Ok(Extractor { engine, race_first_frame, cfg: cfg.clone(), keep_images: false })
     }
 
-    /// "gpu" or "cpu".
-    pub fn backend(&self) -> &'static str {
+    /// The twin that runs the frames: `Backend::Gpu` or `Backend::Cpu`, never `Auto`.
+    pub fn backend(&self) -> Backend {
         match self.engine {
-            Engine::Cpu => "cpu",
-            Engine::Gpu(_) => "gpu",
+            Engine::Cpu => Backend::Cpu,
+            Engine::Gpu(_) => Backend::Gpu,
         }
     }
 

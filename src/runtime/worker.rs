@@ -18,7 +18,7 @@ use parking_lot::Mutex;
 
 use super::slot::Slot;
 use super::status::Counters;
-use crate::config::Config;
+use crate::config::{Backend, Config};
 use crate::extract::{Extractor, Polygon};
 use crate::map::{MapPolygon, PolygonMap};
 use crate::pose::{NoPose, PoseBuffer};
@@ -65,11 +65,11 @@ pub fn spawn(
     out: tokio::sync::mpsc::Sender<FrameEvent>,
 ) -> Result<std::thread::JoinHandle<WorkerEnd>> {
     let config = config.clone();
-    let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<String, String>>();
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<Backend, String>>();
     let thread = std::thread::Builder::new().name("extractor".into()).spawn(move || {
         let mut extractor = match Extractor::new(&config.pipeline) {
             Ok(e) => {
-                let _ = ready_tx.send(Ok(e.backend().to_string()));
+                let _ = ready_tx.send(Ok(e.backend()));
                 e
             }
             Err(e) => {
