@@ -470,24 +470,82 @@ fn join_row_portable([above, row, below]: [&[u32]; 3], plane: &[u32], out: &mut 
 }
 
 crate::extract::cpu::widest_simd! {
-    /// 1 in `out` (w long) where pixel (u, v) is labelled and its left or upper neighbour
-    /// has another label (or none): where a row or a column enters a region.
-    fn labelled_after_another(labels: &Grid<u32>, v: usize, out: &mut [u8]) = labelled_after_another_portable
+    /// 1 in `out` (w long) where pixel (u, v) is labelled and its left neighbour has
+    /// another label (or none): where a row enters a region.
+    fn labelled_after_left(labels: &Grid<u32>, v: usize, out: &mut [u8]) = labelled_after_left_portable
 }
 
 /// Whole rows at a time, as `join_row_portable`.
 #[inline(always)]
-fn labelled_after_another_portable(labels: &Grid<u32>, v: usize, out: &mut [u8]) {
+fn labelled_after_left_portable(labels: &Grid<u32>, v: usize, out: &mut [u8]) {
     let w = labels.width;
     let row = &labels.data[v * w..(v + 1) * w];
-    // Row 0 has nothing above, pixel 0 nothing left: the pixel itself stands in, never differing.
-    let above = if v > 0 { &labels.data[(v - 1) * w..v * w] } else { row };
     let out = &mut out[..w];
-    for u in 0..w {
-        out[u] = u8::from((row[u] != 0) & (row[u] != above[u]));
-    }
+    // Pixel 0 has nothing left: the pixel itself stands in, never differing.
+    out[0] = 0;
     for ((o, &x), &left) in out[1..].iter_mut().zip(&row[1..]).zip(row) {
-        *o |= u8::from((x != 0) & (x != left));
+        *o = u8::from((x != 0) & (x != left));
+    }
+}
+
+/// What `steps_between` keeps of the columns as it goes down the rows: each column's last
+/// label (0: none yet) and the row it was in, and for the row just read, where it steps
+/// to another label up its column (`found`) and from which row (`from`).
+struct Columns {
+    last_label: Vec<u32>,
+    last_row: Vec<u32>,
+    from: Vec<u32>,
+    found: Vec<u8>,
+}
+
+impl Columns {
+    fn new(w: usize) -> Columns {
+        Columns { last_label: vec![0; w], last_row: vec![0; w], from: vec![0; w], found: vec![0; w] }
+    }
+}
+
+/// Row v (`row`) down the columns: `found` where a labelled pixel's nearest labelled pixel
+/// above, at most max_gap + 1 rows up, has another label (its row in `from`); then the
+/// columns' last labels are the row's where it has one.
+fn column_steps(row: &[u32], v: usize, max_gap: usize, columns: &mut Columns) {
+    let Columns { last_label, last_row, from, found } = columns;
+    column_steps_rows(row, v as u32, max_gap as u32 + 1, last_label, last_row, from, found);
+}
+
+crate::extract::cpu::widest_simd! {
+    /// `column_steps` on its parts.
+    fn column_steps_rows(
+        row: &[u32],
+        v: u32,
+        reach: u32,
+        last_label: &mut [u32],
+        last_row: &mut [u32],
+        from: &mut [u32],
+        found: &mut [u8],
+    ) = column_steps_portable
+}
+
+/// Whole rows at a time, comparisons combined with `&`: the loop vectorises.
+#[inline(always)]
+fn column_steps_portable(
+    row: &[u32],
+    v: u32,
+    reach: u32,
+    last_label: &mut [u32],
+    last_row: &mut [u32],
+    from: &mut [u32],
+    found: &mut [u8],
+) {
+    let w = row.len();
+    let (last_label, last_row, from, found) =
+        (&mut last_label[..w], &mut last_row[..w], &mut from[..w], &mut found[..w]);
+    for u in 0..w {
+        let (x, above, at) = (row[u], last_label[u], last_row[u]);
+        // `at` is a row above v wherever `above` is a label.
+        found[u] = u8::from((x != 0) & (above != 0) & (x != above) & (v.wrapping_sub(at) <= reach));
+        from[u] = at;
+        last_label[u] = if x != 0 { x } else { above };
+        last_row[u] = if x != 0 { v } else { at };
     }
 }
 
@@ -550,6 +608,11 @@ impl Segmentation {
     /// For each pair of regions (labels a < b, sorted), how many times a row or a column
     /// steps from one to the other across at most `max_gap` unlabelled pixels with no depth
     /// step (`ratio` per pixel of distance) between the two pixels.
+    ///
+    /// Along a row, from each pixel where a region starts back to the nearest labelled one.
+    /// Up the columns, from each labelled pixel to the last labelled one above it: each
+    /// column's last label and its row are kept as the rows go down (`column_steps`), so
+    /// no column is walked up pixel by pixel (a cache line a pixel).
     fn steps_between(&self, cloud: &Cloud, ratio: f32, max_gap: usize) -> Vec<((u32, u32), u32)> {
         let (w, h) = (self.labels.width, self.labels.height);
         let l = &self.labels.data;
@@ -566,32 +629,41 @@ impl Segmentation {
                 }
             }
         };
-        // The nearest labelled pixel before j, `stride` apart (1: along the row, w: up the
-        // column), at most max_gap + 1 steps back and `room` steps at most.
-        let nearest = |j: usize, stride: usize, room: usize| {
-            (1..=room.min(max_gap + 1)).map(|k| (j - k * stride, k)).find(|&(i, _)| l[i] != 0)
-        };
-        // Rows in blocks side by side, each with its own list: the counts are summed below
-        // whatever order they come in.
+        // The nearest labelled pixel left of j, at most max_gap + 1 steps back and `room`
+        // steps at most.
+        let nearest_left =
+            |j: usize, room: usize| (1..=room.min(max_gap + 1)).map(|k| (j - k, k)).find(|&(i, _)| l[i] != 0);
+        // Rows in blocks side by side, each with its own list (the counts are summed below
+        // whatever order they come in) and its own columns, which a block that starts below
+        // the top first reads down from max_gap + 1 rows above its first row.
         let mut steps: Vec<((u32, u32), u32)> = (0..h)
             .into_par_iter()
             .with_min_len(MIN_BLOCK_ROWS)
             .fold(
-                || (Vec::new(), vec![0u8; w]),
-                |(mut steps, mut changes), v| {
-                    labelled_after_another(&self.labels, v, &mut changes);
-                    for_each_set(&changes, |u| {
+                || (Vec::new(), Columns::new(w), None),
+                |(mut steps, mut columns, next_row): (Vec<_>, Columns, Option<usize>), v| {
+                    if next_row != Some(v) {
+                        columns = Columns::new(w);
+                        for above in v.saturating_sub(max_gap + 1)..v {
+                            column_steps(&l[above * w..(above + 1) * w], above, max_gap, &mut columns);
+                        }
+                    }
+                    labelled_after_left(&self.labels, v, &mut columns.found);
+                    for_each_set(&columns.found, |u| {
                         let j = v * w + u;
-                        for (stride, room) in [(1, u), (w, v)] {
-                            if let Some((i, px)) = nearest(j, stride, room) {
-                                step(&mut steps, i, j, px);
-                            }
+                        if let Some((i, px)) = nearest_left(j, u) {
+                            step(&mut steps, i, j, px);
                         }
                     });
-                    (steps, changes)
+                    column_steps(&l[v * w..(v + 1) * w], v, max_gap, &mut columns);
+                    for_each_set(&columns.found, |u| {
+                        let from = columns.from[u] as usize;
+                        step(&mut steps, from * w + u, v * w + u, v - from);
+                    });
+                    (steps, columns, Some(v + 1))
                 },
             )
-            .map(|(steps, _)| steps)
+            .map(|(steps, _, _)| steps)
             .reduce(Vec::new, |mut a, b| {
                 a.extend(b);
                 a
@@ -1099,8 +1171,59 @@ mod tests {
     }
 
     #[test]
+    fn steps_between_regions_are_the_walks_back_along_rows_and_up_columns() {
+        // Blobs of labels with gaps of 0 to 6 pixels between them, dropouts, and depth
+        // steps; more rows than one block, so that blocks start below the top on 4 threads.
+        let (w, h) = (53usize, 90usize);
+        let data: Vec<u32> = (0..w * h)
+            .map(|i| {
+                let (u, v) = ((i % w) as u32, (i / w) as u32);
+                if hash(u / 6 + 101 * (v / 3)).is_multiple_of(4) { 0 } else { 1 + hash(u / 11 + 7 * (v / 2)) % 5 }
+            })
+            .collect();
+        let seg = Segmentation::from_labels(Grid { width: w, height: h, data: data.clone() }, 5, 1);
+        let depth = Grid {
+            width: w,
+            height: h,
+            data: (0..w * h)
+                .map(|i| match hash(i as u32 ^ 0x5bd1) % 23 {
+                    0 => 0.0,
+                    1 => 2.0,
+                    _ => 1.0 + (i % w) as f32 * 1e-3,
+                })
+                .collect(),
+        };
+        let cloud = Cloud::new(&depth, &centred_camera(w, h, 40.0));
+        let (ratio, max_gap) = (0.03f32, 4usize);
+        // The oracle: from every labelled pixel, back along its row and up its column to the
+        // nearest labelled pixel at most max_gap + 1 away; a pair where the two differ in
+        // label and not by a depth step.
+        let l = &seg.labels.data;
+        let mut want = std::collections::BTreeMap::<(u32, u32), u32>::new();
+        for j in (0..w * h).filter(|&j| l[j] != 0) {
+            let (u, v) = (j % w, j / w);
+            for (stride, room) in [(1, u), (w, v)] {
+                let Some((i, px)) = (1..=room.min(max_gap + 1)).map(|k| (j - k * stride, k)).find(|&(i, _)| l[i] != 0)
+                else {
+                    continue;
+                };
+                let (zi, zj) = (depth.data[i], depth.data[j]);
+                if l[i] != l[j] && zi > 0.0 && zj > 0.0 && (zi - zj).abs() <= ratio * px as f32 * zi.min(zj) {
+                    *want.entry((l[i].min(l[j]), l[i].max(l[j]))).or_default() += 1;
+                }
+            }
+        }
+        let want: Vec<((u32, u32), u32)> = want.into_iter().collect();
+        assert!(want.len() >= 5 && want.iter().any(|(_, n)| *n > 20), "pairs to find: {want:?}");
+        for threads in [1, 4] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a pool");
+            assert_eq!(pool.install(|| seg.steps_between(&cloud, ratio, max_gap)), want, "{threads} threads");
+        }
+    }
+
+    #[test]
     fn row_scans_are_the_pixel_by_pixel_ones() {
-        // Growth's wave on a row, and where rows and columns enter a region.
+        // Growth's wave on a row, and where rows enter a region.
         // Labels in blobs and specks, 0 between, on widths that leave every remainder of
         // the eight-byte words and of the vectors.
         for (w, h) in [(1, 1), (1, 5), (7, 3), (37, 29), (70, 11)] {
@@ -1149,12 +1272,12 @@ mod tests {
                     want_took[v as usize] |= joins;
                 }
             }
-            // Where a row or a column enters a region (the creases' and joins' scan).
+            // Where a row enters a region (the creases' and joins' scan).
             let mut entries = Vec::new();
             for v in 0..h as isize {
                 for u in 0..w as isize {
                     let x = at(u, v);
-                    if x != 0 && ((u > 0 && at(u - 1, v) != x) || (v > 0 && at(u, v - 1) != x)) {
+                    if x != 0 && u > 0 && at(u - 1, v) != x {
                         entries.push((u as usize, v as usize));
                     }
                 }
@@ -1166,7 +1289,7 @@ mod tests {
                 let around = [line(v.saturating_sub(1)), line(v), line((v + 1).min(h - 1))];
                 let (open, took) = join_row(around, &planes.data[v * w..(v + 1) * w], &mut got[v * w..(v + 1) * w]);
                 assert_eq!((open, took), (want_open[v], want_took[v]), "{w} x {h}, row {v}");
-                labelled_after_another(&labels, v, &mut mask);
+                labelled_after_left(&labels, v, &mut mask);
                 for_each_set(&mask, |u| got_entries.push((u, v)));
             }
             assert_eq!(got, want, "{w} x {h}");
