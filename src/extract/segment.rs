@@ -469,28 +469,54 @@ fn join_row_portable([above, row, below]: [&[u32]; 3], plane: &[u32], out: &mut 
     (still_open, took)
 }
 
+/// How a labelled pixel meets the last labelled pixel before it along its row or up its
+/// column, that a scan looks for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Meeting {
+    /// A pixel of another label: where a row or a column steps from one region to another
+    /// (the creases' and joins' scan).
+    OtherLabel,
+    /// A pixel of the same label, this one, across a gap (the joins' bridges).
+    SameLabelAcrossGap(u32),
+}
+
+impl Meeting {
+    /// As the row loops take it: 0 for `OtherLabel` (no region is labelled 0).
+    fn same_label(self) -> u32 {
+        match self {
+            Meeting::OtherLabel => 0,
+            Meeting::SameLabelAcrossGap(label) => label,
+        }
+    }
+}
+
+/// 1 in `out` where a pixel of `row` is one `meeting` looks for whose left neighbour is of
+/// another label or none (`OtherLabel`; 0 for a row's first pixel), or is none
+/// (`SameLabelAcrossGap`): where the walk back along the row to the last labelled pixel
+/// starts.
+fn row_meetings(row: &[u32], meeting: Meeting, out: &mut [u8]) {
+    row_meetings_rows(row, meeting.same_label(), out);
+}
+
 crate::extract::cpu::widest_simd! {
-    /// 1 in `out` (w long) where pixel (u, v) is labelled and its left neighbour has
-    /// another label (or none): where a row enters a region.
-    fn labelled_after_left(labels: &Grid<u32>, v: usize, out: &mut [u8]) = labelled_after_left_portable
+    /// `row_meetings` on a plain label.
+    fn row_meetings_rows(row: &[u32], same: u32, out: &mut [u8]) = row_meetings_portable
 }
 
 /// Whole rows at a time, as `join_row_portable`.
 #[inline(always)]
-fn labelled_after_left_portable(labels: &Grid<u32>, v: usize, out: &mut [u8]) {
-    let w = labels.width;
-    let row = &labels.data[v * w..(v + 1) * w];
-    let out = &mut out[..w];
-    // Pixel 0 has nothing left: the pixel itself stands in, never differing.
-    out[0] = 0;
+fn row_meetings_portable(row: &[u32], same: u32, out: &mut [u8]) {
+    let out = &mut out[..row.len()];
+    let Some(first) = out.first_mut() else { return };
+    *first = 0;
     for ((o, &x), &left) in out[1..].iter_mut().zip(&row[1..]).zip(row) {
-        *o = u8::from((x != 0) & (x != left));
+        *o = if same == 0 { u8::from((x != 0) & (x != left)) } else { u8::from((x == same) & (left == 0)) };
     }
 }
 
-/// What `steps_between` keeps of the columns as it goes down the rows: each column's last
-/// label (0: none yet) and the row it was in, and for the row just read, where it steps
-/// to another label up its column (`found`) and from which row (`from`).
+/// What a scan down the rows keeps of the columns: each column's last label (0: none yet)
+/// and the row it was in, and for the row just read, where its pixel meets the last
+/// labelled pixel above it as the scan looks for (`found`) and that pixel's row (`from`).
 struct Columns {
     last_label: Vec<u32>,
     last_row: Vec<u32>,
@@ -502,35 +528,40 @@ impl Columns {
     fn new(w: usize) -> Columns {
         Columns { last_label: vec![0; w], last_row: vec![0; w], from: vec![0; w], found: vec![0; w] }
     }
-}
 
-/// Row v (`row`) down the columns: `found` where a labelled pixel's nearest labelled pixel
-/// above, at most max_gap + 1 rows up, has another label (its row in `from`); then the
-/// columns' last labels are the row's where it has one.
-fn column_steps(row: &[u32], v: usize, max_gap: usize, columns: &mut Columns) {
-    let Columns { last_label, last_row, from, found } = columns;
-    column_steps_rows(row, v as u32, max_gap as u32 + 1, last_label, last_row, from, found);
+    /// Row v (`row`) down the columns: `found` where a labelled pixel meets the last
+    /// labelled pixel above it, at most `reach` rows up, as `meeting` says (across a gap:
+    /// two rows up or more); then the columns' last labels are the row's where it has one.
+    fn down(&mut self, row: &[u32], v: usize, reach: usize, meeting: Meeting) {
+        let Columns { last_label, last_row, from, found } = self;
+        let same = meeting.same_label();
+        column_meetings(row, v as u32, reach as u32, same, last_label, last_row, from, found);
+    }
 }
 
 crate::extract::cpu::widest_simd! {
-    /// `column_steps` on its parts.
-    fn column_steps_rows(
+    /// `Columns::down` on its parts.
+    #[allow(clippy::too_many_arguments)]
+    fn column_meetings(
         row: &[u32],
         v: u32,
         reach: u32,
+        same: u32,
         last_label: &mut [u32],
         last_row: &mut [u32],
         from: &mut [u32],
         found: &mut [u8],
-    ) = column_steps_portable
+    ) = column_meetings_portable
 }
 
 /// Whole rows at a time, comparisons combined with `&`: the loop vectorises.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn column_steps_portable(
+fn column_meetings_portable(
     row: &[u32],
     v: u32,
     reach: u32,
+    same: u32,
     last_label: &mut [u32],
     last_row: &mut [u32],
     from: &mut [u32],
@@ -542,7 +573,13 @@ fn column_steps_portable(
     for u in 0..w {
         let (x, above, at) = (row[u], last_label[u], last_row[u]);
         // `at` is a row above v wherever `above` is a label.
-        found[u] = u8::from((x != 0) & (above != 0) & (x != above) & (v.wrapping_sub(at) <= reach));
+        let up = v.wrapping_sub(at);
+        let near = (x != 0) & (above != 0) & (up <= reach);
+        found[u] = if same == 0 {
+            u8::from(near & (x != above))
+        } else {
+            u8::from(near & (x == same) & (above == same) & (up >= 2))
+        };
         from[u] = at;
         last_label[u] = if x != 0 { x } else { above };
         last_row[u] = if x != 0 { v } else { at };
@@ -611,7 +648,7 @@ impl Segmentation {
     ///
     /// Along a row, from each pixel where a region starts back to the nearest labelled one.
     /// Up the columns, from each labelled pixel to the last labelled one above it: each
-    /// column's last label and its row are kept as the rows go down (`column_steps`), so
+    /// column's last label and its row are kept as the rows go down (`Columns`), so
     /// no column is walked up pixel by pixel (a cache line a pixel).
     fn steps_between(&self, cloud: &Cloud, ratio: f32, max_gap: usize) -> Vec<((u32, u32), u32)> {
         let (w, h) = (self.labels.width, self.labels.height);
@@ -645,17 +682,18 @@ impl Segmentation {
                     if next_row != Some(v) {
                         columns = Columns::new(w);
                         for above in v.saturating_sub(max_gap + 1)..v {
-                            column_steps(&l[above * w..(above + 1) * w], above, max_gap, &mut columns);
+                            columns.down(&l[above * w..(above + 1) * w], above, max_gap + 1, Meeting::OtherLabel);
                         }
                     }
-                    labelled_after_left(&self.labels, v, &mut columns.found);
+                    let row = &l[v * w..(v + 1) * w];
+                    row_meetings(row, Meeting::OtherLabel, &mut columns.found);
                     for_each_set(&columns.found, |u| {
                         let j = v * w + u;
                         if let Some((i, px)) = nearest_left(j, u) {
                             step(&mut steps, i, j, px);
                         }
                     });
-                    column_steps(&l[v * w..(v + 1) * w], v, max_gap, &mut columns);
+                    columns.down(row, v, max_gap + 1, Meeting::OtherLabel);
                     for_each_set(&columns.found, |u| {
                         let from = columns.from[u] as usize;
                         step(&mut steps, from * w + u, v * w + u, v - from);
@@ -772,29 +810,23 @@ impl Segmentation {
             };
         let (mut row_fills, mut column_fills) = (Vec::new(), Vec::new());
         for &(label, fit, [u0, v0, u1, v1]) in &united {
-            let mut column_last: Vec<Option<(usize, u32)>> = vec![None; u1 - u0 + 1];
+            let meeting = Meeting::SameLabelAcrossGap(label);
+            let mut columns = Columns::new(u1 - u0 + 1);
             for v in v0..=v1 {
-                let mut row_last: Option<(usize, u32)> = None;
-                for u in u0..=u1 {
-                    let l = labels[v * w + u];
-                    if l == 0 {
-                        continue;
+                let row = &labels[v * w + u0..=v * w + u1];
+                // Back along the row from a pixel of the region after a gap, to the last
+                // labelled pixel in the box.
+                row_meetings(row, meeting, &mut columns.found);
+                for_each_set(&columns.found, |k| {
+                    let last = (1..=k.min(JOIN_GAP_PX + 1)).map(|d| k - d).find(|&t| row[t] != 0);
+                    if let Some(t0) = last.filter(|&t0| row[t0] == label) {
+                        gap(&mut row_fills, u0 + t0, u0 + k, &|t| v * w + t, label, fit);
                     }
-                    if l == label {
-                        if let Some((t0, l0)) = row_last
-                            && l0 == label
-                        {
-                            gap(&mut row_fills, t0, u, &|t| v * w + t, label, fit);
-                        }
-                        if let Some((t0, l0)) = column_last[u - u0]
-                            && l0 == label
-                        {
-                            gap(&mut column_fills, t0, v, &|t| t * w + u, label, fit);
-                        }
-                    }
-                    row_last = Some((u, l));
-                    column_last[u - u0] = Some((v, l));
-                }
+                });
+                columns.down(row, v, JOIN_GAP_PX + 1, meeting);
+                for_each_set(&columns.found, |k| {
+                    gap(&mut column_fills, columns.from[k] as usize, v, &|t| t * w + u0 + k, label, fit);
+                });
             }
         }
         // Rows' fills first: where a gap is both, the row's fill is the one kept.
@@ -1289,7 +1321,7 @@ mod tests {
                 let around = [line(v.saturating_sub(1)), line(v), line((v + 1).min(h - 1))];
                 let (open, took) = join_row(around, &planes.data[v * w..(v + 1) * w], &mut got[v * w..(v + 1) * w]);
                 assert_eq!((open, took), (want_open[v], want_took[v]), "{w} x {h}, row {v}");
-                labelled_after_left(&labels, v, &mut mask);
+                row_meetings(&labels.data[v * w..(v + 1) * w], Meeting::OtherLabel, &mut mask);
                 for_each_set(&mask, |u| got_entries.push((u, v)));
             }
             assert_eq!(got, want, "{w} x {h}");
