@@ -533,40 +533,19 @@ impl Columns {
     /// labelled pixel above it, at most `reach` rows up, as `meeting` says (across a gap:
     /// two rows up or more); then the columns' last labels are the row's where it has one.
     fn down(&mut self, row: &[u32], v: usize, reach: usize, meeting: Meeting) {
-        let Columns { last_label, last_row, from, found } = self;
-        let same = meeting.same_label();
-        column_meetings(row, v as u32, reach as u32, same, last_label, last_row, from, found);
+        column_meetings(row, v as u32, reach as u32, meeting.same_label(), self);
     }
 }
 
 crate::extract::cpu::widest_simd! {
-    /// `Columns::down` on its parts.
-    #[allow(clippy::too_many_arguments)]
-    fn column_meetings(
-        row: &[u32],
-        v: u32,
-        reach: u32,
-        same: u32,
-        last_label: &mut [u32],
-        last_row: &mut [u32],
-        from: &mut [u32],
-        found: &mut [u8],
-    ) = column_meetings_portable
+    /// `Columns::down` on a plain label.
+    fn column_meetings(row: &[u32], v: u32, reach: u32, same: u32, columns: &mut Columns) = column_meetings_portable
 }
 
 /// Whole rows at a time, comparisons combined with `&`: the loop vectorises.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn column_meetings_portable(
-    row: &[u32],
-    v: u32,
-    reach: u32,
-    same: u32,
-    last_label: &mut [u32],
-    last_row: &mut [u32],
-    from: &mut [u32],
-    found: &mut [u8],
-) {
+fn column_meetings_portable(row: &[u32], v: u32, reach: u32, same: u32, columns: &mut Columns) {
+    let Columns { last_label, last_row, from, found } = columns;
     let w = row.len();
     let (last_label, last_row, from, found) =
         (&mut last_label[..w], &mut last_row[..w], &mut from[..w], &mut found[..w]);
