@@ -18,7 +18,7 @@ use rayon::prelude::*;
 
 use super::Grid;
 use super::cloud::Cloud;
-use super::cpu::ransac::{PlaneFit, PointBatch, refit, sample_stride, support};
+use super::cpu::ransac::{PlaneFit, PointBatch, for_each_strided, refit, sample_stride, support};
 use crate::grid::{component_runs, first_other, flood, for_each_set, leading, par_rows, runs};
 
 /// Every `stride`-th of a region's valid points, in scan order, each standing for
@@ -42,12 +42,8 @@ impl PointSample {
         if stride == 1 {
             return PointSample { points: points.to_vec(), stride };
         }
-        // An index loop: `step_by`'s fold was not inlined.
-        let (mut sample, mut i) = (Vec::with_capacity(points.len().div_ceil(stride)), 0);
-        while let Some(p) = points.get(i) {
-            sample.push(*p);
-            i += stride;
-        }
+        let mut sample = Vec::with_capacity(points.len().div_ceil(stride));
+        for_each_strided(points, stride, |p| sample.push(*p));
         PointSample { points: sample, stride }
     }
 }
@@ -173,13 +169,7 @@ impl Segmentation {
             if stride == 1 {
                 self.extend_points(r, cloud, &mut batch.points);
             } else {
-                let pixels = &self.pixels[r];
-                // An index loop: `step_by`'s fold, not inlined, took half as long again.
-                let mut k = 0;
-                while let Some(&i) = pixels.get(k) {
-                    batch.points.extend(cloud.point(i as usize));
-                    k += stride;
-                }
+                for_each_strided(&self.pixels[r], stride, |&i| batch.points.extend(cloud.point(i as usize)));
             }
             batch.ranges.push(start..batch.points.len());
         }
@@ -514,6 +504,11 @@ fn row_meetings_portable(row: &[u32], same: u32, out: &mut [u8]) {
     }
 }
 
+/// The last labelled pixel of `row` before pixel k, at most `reach` pixels back.
+fn labelled_before(row: &[u32], k: usize, reach: usize) -> Option<usize> {
+    (1..=k.min(reach)).map(|d| k - d).find(|&t| row[t] != 0)
+}
+
 /// What a scan down the rows keeps of the columns: each column's last label (0: none yet)
 /// and the row it was in, and for the row just read, where its pixel meets the last
 /// labelled pixel above it as the scan looks for (`found`) and that pixel's row (`from`).
@@ -645,10 +640,6 @@ impl Segmentation {
                 }
             }
         };
-        // The nearest labelled pixel left of j, at most max_gap + 1 steps back and `room`
-        // steps at most.
-        let nearest_left =
-            |j: usize, room: usize| (1..=room.min(max_gap + 1)).map(|k| (j - k, k)).find(|&(i, _)| l[i] != 0);
         // Rows in blocks side by side, each with its own list (the counts are summed below
         // whatever order they come in) and its own columns, which a block that starts below
         // the top first reads down from max_gap + 1 rows above its first row.
@@ -667,9 +658,8 @@ impl Segmentation {
                     let row = &l[v * w..(v + 1) * w];
                     row_meetings(row, Meeting::OtherLabel, &mut columns.found);
                     for_each_set(&columns.found, |u| {
-                        let j = v * w + u;
-                        if let Some((i, px)) = nearest_left(j, u) {
-                            step(&mut steps, i, j, px);
+                        if let Some(t) = labelled_before(row, u, max_gap + 1) {
+                            step(&mut steps, v * w + t, v * w + u, u - t);
                         }
                     });
                     columns.down(row, v, max_gap + 1, Meeting::OtherLabel);
@@ -797,8 +787,7 @@ impl Segmentation {
                 // labelled pixel in the box.
                 row_meetings(row, meeting, &mut columns.found);
                 for_each_set(&columns.found, |k| {
-                    let last = (1..=k.min(JOIN_GAP_PX + 1)).map(|d| k - d).find(|&t| row[t] != 0);
-                    if let Some(t0) = last.filter(|&t0| row[t0] == label) {
+                    if let Some(t0) = labelled_before(row, k, JOIN_GAP_PX + 1).filter(|&t0| row[t0] == label) {
                         gap(&mut row_fills, u0 + t0, u0 + k, &|t| v * w + t, label, fit);
                     }
                 });

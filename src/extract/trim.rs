@@ -54,10 +54,11 @@ pub fn trim_at_neighbour_planes(
                 continue;
             }
             let pts = points[a];
-            let (counted, strays) = (pts.len(), count_beyond(pts, n.into(), d, side, dist));
-            if pts.is_empty() || strays as f64 > STRAY_SHARE * counted as f64 {
+            let strays = count_beyond(pts, n.into(), d, side, dist);
+            if pts.is_empty() || strays as f64 > STRAY_SHARE * pts.len() as f64 {
                 tracing::debug!(
-                    "polygon {a} crosses the plane of polygon {b}: {strays} of {counted} points counted beyond it"
+                    "polygon {a} crosses the plane of polygon {b}: {strays} of {} points counted beyond it",
+                    pts.len()
                 );
                 continue;
             }
@@ -86,16 +87,14 @@ crate::extract::cpu::widest_simd! {
     fn count_beyond(points: &[[f32; 3]], n: [f64; 3], d: f64, side: f64, dist: f64) -> usize = count_beyond_portable
 }
 
+/// `side * (n . p + d) < -dist`, written out (as `f` in `trim_at_neighbour_planes` is) in
+/// plain arithmetic, so the loop vectorises.
 #[inline(always)]
 fn count_beyond_portable(points: &[[f32; 3]], n: [f64; 3], d: f64, side: f64, dist: f64) -> usize {
-    points.iter().map(|p| beyond(p, n, d, side, dist)).sum()
-}
-
-/// Whether `side * (n . p + d) < -dist`, written out (as `f` in `trim_at_neighbour_planes`
-/// is) in plain arithmetic, so the loop vectorises.
-#[inline(always)]
-fn beyond(p: &[f32; 3], n: [f64; 3], d: f64, side: f64, dist: f64) -> usize {
-    usize::from(side * (n[0] * p[0] as f64 + n[1] * p[1] as f64 + n[2] * p[2] as f64 + d) < -dist)
+    points
+        .iter()
+        .map(|p| usize::from(side * (n[0] * p[0] as f64 + n[1] * p[1] as f64 + n[2] * p[2] as f64 + d) < -dist))
+        .sum()
 }
 
 #[cfg(test)]

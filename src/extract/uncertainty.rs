@@ -416,7 +416,7 @@ mod tests {
         let (offset, dist) = (1.4, 0.01);
         let [e1, e2] = in_plane_axes(&n).expect("a unit normal");
         let frame = PlaneFrame { n: n.into(), offset, foot: (-n * offset).into(), axes: [e1.into(), e2.into()], dist };
-        for size in [0usize, 3, 4, 9, 1000, 1001, 1003] {
+        for size in [0usize, 3, 4, 9, 1000, 1001, 1003, 20_002] {
             // On the plane within 3 mm, every fourth point 5 cm off it.
             let points: Vec<[f32; 3]> = (0..size)
                 .map(|i| {
