@@ -266,7 +266,7 @@ impl Segmentation {
     /// before the riser got there. A pixel joins at wave k when, after wave k - 1, a
     /// 4-neighbour carries its plane's label; the result does not depend on scan order. A
     /// pixel's plane does not depend on the labels: it is found once for every unlabelled
-    /// pixel (`plane_image`), and the waves are then sweeps of whole rows (`join_waves`).
+    /// pixel (`plane_image`), and the waves are then byte masks of whole rows (`join_waves`).
     pub fn grow(&mut self, fits: &[Option<PlaneFit>], accepted: &[bool], cloud: &Cloud, dist: f32, waves: u32) {
         if waves > 0 {
             let nearby = NearbyRegions::new(self, accepted, (NEARBY_PER_WAVE * waves) as usize);
@@ -333,7 +333,9 @@ fn plane_row_portable(
 ) {
     let cells = out.chunks_mut(CELL_PX).zip(held.chunks(CELL_PX)).zip(depth.chunks(CELL_PX).zip(ray_x.chunks(CELL_PX)));
     for (c, ((out, held), (depth, ray_x))) in cells.enumerate() {
-        if held.iter().all(|&l| l != 0) {
+        // Without an early exit, so the test is a vector compare: `all` went label by
+        // label, and was a third of this loop's time at 640x480.
+        if held.iter().fold(true, |all, &l| all & (l != 0)) {
             continue;
         }
         let mut nearest = [f64::INFINITY; CELL_PX];
@@ -354,110 +356,130 @@ fn plane_row_portable(
     }
 }
 
-/// Growth's waves, each a sweep of the rows that still have a pixel to take: an unlabelled
-/// pixel takes its plane's label (`planes`, 0 for none) when a 4-neighbour had that label
-/// after the wave before. The rows are swept in blocks, one task each (`sweep_block`); a
-/// block reads its neighbours' edge rows from copies taken before the wave. The sweeps stop
-/// early once a wave takes nothing.
+/// Growth's waves. A pixel with a plane (`planes`, 0 for none) joins at wave 1 when a
+/// 4-neighbour already holds its plane's label, and at wave k + 1 when a 4-neighbour of
+/// the same plane joined by wave k. Which neighbours can bring a pixel in is found once
+/// (`join_links`); the waves are then byte masks of whole rows (`wave_row`), 64 pixels an
+/// instruction at AVX-512 where a sweep comparing labels took 16, and stop once a wave
+/// takes nothing. The pixels that joined take their planes' labels at the end.
 fn join_waves(labels: &mut Grid<u32>, planes: &Grid<u32>, waves: u32) {
     let (w, h) = (labels.width, labels.height);
-    if w == 0 || h == 0 {
+    if waves == 0 || w == 0 || h == 0 {
         return;
     }
-    let row = |v: usize| v * w..(v + 1) * w;
-    let mut open: Vec<bool> = (0..h)
-        .map(|v| labels.data[row(v)].iter().zip(&planes.data[row(v)]).any(|(&l, &p)| (l == 0) & (p != 0)))
-        .collect();
-    // A block for each thread: a sweep is a few tens of microseconds, one thread's alone.
-    let block = h.div_ceil(rayon::current_num_threads()).max(MIN_BLOCK_ROWS);
-    let blocks = h.div_ceil(block);
-    // Block k's first row at 2k, its last at 2k + 1.
-    let mut edges = vec![0u32; 2 * blocks * w];
-    for _ in 0..waves {
-        if blocks > 1 {
-            for (k, pair) in edges.chunks_mut(2 * w).enumerate() {
-                let (first, last) = (k * block, ((k + 1) * block).min(h) - 1);
-                pair[..w].copy_from_slice(&labels.data[row(first)]);
-                pair[w..].copy_from_slice(&labels.data[row(last)]);
-            }
+    let links = par_rows(w, h, 0u8, MIN_BLOCK_ROWS, |v, out| {
+        join_links(rows_around(&labels.data, w, v), rows_around(&planes.data, w, v), [v > 0, v + 1 < h], out);
+    });
+    let mut joined: Vec<u8> = links.iter().map(|&k| k & HELD_BESIDE).collect();
+    let mut next = vec![0u8; w * h];
+    for _ in 1..waves {
+        let mut changed = false;
+        for (v, (links, next)) in links.chunks_exact(w).zip(next.chunks_exact_mut(w)).enumerate() {
+            changed |= wave_row(rows_around(&joined, w, v), links, next);
         }
-        let edges = &edges;
-        let tasks = labels.data.par_chunks_mut(block * w).zip(open.par_chunks_mut(block)).enumerate();
-        let changed = tasks
-            .map(|(k, (rows, open))| {
-                let above = (k > 0).then(|| &edges[(2 * k - 1) * w..2 * k * w]);
-                let below = (k + 1 < blocks).then(|| &edges[2 * (k + 1) * w..(2 * k + 3) * w]);
-                sweep_block(rows, open, &planes.data[k * block * w..], w, [above, below])
-            })
-            .reduce(|| false, |a, b| a | b);
+        std::mem::swap(&mut joined, &mut next);
         if !changed {
             break;
         }
     }
-}
-
-/// The fewest rows in a block of the row scans split over threads (`join_waves`,
-/// `steps_between`): fewer is too little work to hand to another thread.
-const MIN_BLOCK_ROWS: usize = 16;
-
-/// One wave over a block of rows (`planes` from the block's first row on), reading the
-/// rows `outside` it above and below (None at the image's edge) as the wave found them.
-/// A row's new labels are written back once the row below has read the old ones; only a
-/// row that took a pixel is written. Whether one did.
-fn sweep_block(rows: &mut [u32], open: &mut [bool], planes: &[u32], w: usize, outside: [Option<&[u32]>; 2]) -> bool {
-    let h = rows.len() / w;
-    let mut new = [vec![0u32; w], vec![0u32; w]];
-    let (mut changed, mut waiting) = (false, None);
-    for v in 0..h {
-        let joined = open[v]
-            .then(|| {
-                let row = &rows[v * w..(v + 1) * w];
-                // The row itself stands in beyond the image (see `join_row_portable`).
-                let above = if v > 0 { &rows[(v - 1) * w..v * w] } else { outside[0].unwrap_or(row) };
-                let below = if v + 1 < h { &rows[(v + 1) * w..(v + 2) * w] } else { outside[1].unwrap_or(row) };
-                let (still_open, took) = join_row([above, row, below], &planes[v * w..(v + 1) * w], &mut new[v % 2]);
-                open[v] = still_open;
-                changed |= took;
-                took.then_some(v)
-            })
-            .flatten();
-        if let Some(u) = std::mem::replace(&mut waiting, joined) {
-            rows[u * w..(u + 1) * w].copy_from_slice(&new[u % 2]);
-        }
-    }
-    if let Some(u) = waiting {
-        rows[u * w..(u + 1) * w].copy_from_slice(&new[u % 2]);
-    }
-    changed
+    take_planes(&joined, &planes.data, &mut labels.data);
 }
 
 crate::extract::cpu::widest_simd! {
-    /// One wave on a row into `out`, given the labels of the rows above, at and below it and
-    /// the row's planes: (whether a pixel of the row may still join, whether one did).
-    fn join_row(labels: [&[u32]; 3], plane: &[u32], out: &mut [u32]) -> (bool, bool) = join_row_portable
+    /// Where `joined`, the label becomes the plane's.
+    fn take_planes(joined: &[u8], planes: &[u32], labels: &mut [u32]) = take_planes_portable
 }
 
-/// Whole rows at a time, comparisons combined with `&` and `|`: the loops vectorise. A
-/// pixel's plane is never 0 where it joins, so a neighbour beyond the image (0, or the
-/// row itself standing in above and below: 0 at an unlabelled pixel) never matches.
 #[inline(always)]
-fn join_row_portable([above, row, below]: [&[u32]; 3], plane: &[u32], out: &mut [u32]) -> (bool, bool) {
-    let w = row.len();
-    let (above, below, plane, out) = (&above[..w], &below[..w], &plane[..w], &mut out[..w]);
-    for u in 0..w {
-        let (x, p) = (row[u], plane[u]);
-        out[u] = if (x == 0) & (p != 0) & ((above[u] == p) | (below[u] == p)) { p } else { x };
+fn take_planes_portable(joined: &[u8], planes: &[u32], labels: &mut [u32]) {
+    let n = labels.len();
+    let (joined, planes) = (&joined[..n], &planes[..n]);
+    for i in 0..n {
+        // By masks: as a select, the compiler chose between the two addresses to load from.
+        let take = u32::from(joined[i] != 0).wrapping_neg();
+        labels[i] = (planes[i] & take) | (labels[i] & !take);
     }
-    for ((o, (&x, &p)), &right) in out.iter_mut().zip(row.iter().zip(plane)).zip(&row[1..]) {
-        *o = if (x == 0) & (p != 0) & (right == p) { p } else { *o };
-    }
-    for ((o, (&x, &p)), &left) in out[1..].iter_mut().zip(row[1..].iter().zip(&plane[1..])).zip(row) {
-        *o = if (x == 0) & (p != 0) & (left == p) { p } else { *o };
-    }
-    let still_open = out.iter().zip(plane).fold(false, |any, (&o, &p)| any | ((o == 0) & (p != 0)));
-    let took = out.iter().zip(row).fold(false, |any, (&o, &x)| any | (o != x));
-    (still_open, took)
 }
+
+/// Rows v - 1, v and v + 1 of an image `w` wide; beyond its top or bottom, row v stands in.
+fn rows_around<T>(data: &[T], w: usize, v: usize) -> [&[T]; 3] {
+    let row = |v: usize| &data[v * w..(v + 1) * w];
+    let last = data.len() / w - 1;
+    [row(v.saturating_sub(1)), row(v), row((v + 1).min(last))]
+}
+
+/// `join_links`' flags: a 4-neighbour holds the pixel's plane's label already.
+const HELD_BESIDE: u8 = 1;
+/// The neighbour to the left, right, above or below has the pixel's plane.
+const SAME_LEFT: u8 = 2;
+const SAME_RIGHT: u8 = 4;
+const SAME_ABOVE: u8 = 8;
+const SAME_BELOW: u8 = 16;
+
+crate::extract::cpu::widest_simd! {
+    /// For each pixel of a row with a plane, which 4-neighbours bring it into its plane's
+    /// region (the flags above; 0 for a pixel without a plane), given the labels and the
+    /// planes of the rows above, at and below it, and whether those rows are in the image.
+    fn join_links(labels: [&[u32]; 3], planes: [&[u32]; 3], inside: [bool; 2], out: &mut [u8]) = join_links_portable
+}
+
+/// Whole rows at a time, comparisons combined with `&` and `|`: the loops vectorise. Beyond
+/// the image's top and bottom the row itself stands in: its label at a pixel with a plane
+/// is 0, never the plane's, and its planes are ignored by `inside`.
+#[inline(always)]
+fn join_links_portable(
+    [above, row, below]: [&[u32]; 3],
+    [p_above, plane, p_below]: [&[u32]; 3],
+    [up, down]: [bool; 2],
+    out: &mut [u8],
+) {
+    let w = row.len();
+    let (above, below, p_above, plane, p_below, out) =
+        (&above[..w], &below[..w], &p_above[..w], &plane[..w], &p_below[..w], &mut out[..w]);
+    let flag = |set: bool, flag: u8| if set { flag } else { 0 };
+    for u in 0..w {
+        let p = plane[u];
+        let held = flag((above[u] == p) | (below[u] == p), HELD_BESIDE);
+        let same = flag((p_above[u] == p) & up, SAME_ABOVE) | flag((p_below[u] == p) & down, SAME_BELOW);
+        out[u] = flag(p != 0, held | same);
+    }
+    for u in 1..w {
+        let p = plane[u];
+        out[u] |= flag(p != 0, flag(row[u - 1] == p, HELD_BESIDE) | flag(plane[u - 1] == p, SAME_LEFT));
+    }
+    for u in 0..w.saturating_sub(1) {
+        let p = plane[u];
+        out[u] |= flag(p != 0, flag(row[u + 1] == p, HELD_BESIDE) | flag(plane[u + 1] == p, SAME_RIGHT));
+    }
+}
+
+crate::extract::cpu::widest_simd! {
+    /// One wave on a row: `joined` (1 or 0) of the rows above, at and below it before the
+    /// wave, `links` the row's `join_links`; the row after the wave into `out`. Whether it took a pixel.
+    fn wave_row(joined: [&[u8]; 3], links: &[u8], out: &mut [u8]) -> bool = wave_row_portable
+}
+
+#[inline(always)]
+fn wave_row_portable([above, row, below]: [&[u8]; 3], links: &[u8], out: &mut [u8]) -> bool {
+    let w = row.len();
+    let (above, below, links, out) = (&above[..w], &below[..w], &links[..w], &mut out[..w]);
+    // 1 where a neighbour of the same plane on that side has joined.
+    let from = |link: u8, side: u8, joined: u8| u8::from(link & side != 0) & joined;
+    for u in 0..w {
+        out[u] = row[u] | from(links[u], SAME_ABOVE, above[u]) | from(links[u], SAME_BELOW, below[u]);
+    }
+    for u in 1..w {
+        out[u] |= from(links[u], SAME_LEFT, row[u - 1]);
+    }
+    for u in 0..w.saturating_sub(1) {
+        out[u] |= from(links[u], SAME_RIGHT, row[u + 1]);
+    }
+    out.iter().zip(row).fold(false, |any, (&o, &x)| any | (o != x))
+}
+
+/// The fewest rows in a task of the row scans split over threads (`join_waves`' links,
+/// `steps_between`): fewer is too little work to hand to another thread.
+const MIN_BLOCK_ROWS: usize = 16;
 
 /// How a labelled pixel meets the last labelled pixel before it along its row or up its
 /// column, that a scan looks for.
@@ -1223,7 +1245,7 @@ mod tests {
 
     #[test]
     fn row_scans_are_the_pixel_by_pixel_ones() {
-        // Growth's wave on a row, and where rows enter a region.
+        // Growth's links and wave on a row, and where rows enter a region.
         // Labels in blobs and specks, 0 between, on widths that leave every remainder of
         // the eight-byte words and of the vectors.
         for (w, h) in [(1, 1), (1, 5), (7, 3), (37, 29), (70, 11)] {
@@ -1248,28 +1270,50 @@ mod tests {
                     labels.data[v as usize * w + u as usize]
                 }
             };
-            // Each pixel's plane: a label near the pixel's own blob, or none.
+            // Each unlabelled pixel's plane: a label near the pixel's own blob, or none (0,
+            // as on every labelled pixel: `plane_image`).
             let plane = |u: isize, v: isize| {
-                let h = hash((u * 31 + v * 7) as u32);
-                if h.is_multiple_of(4) { 0 } else { 1 + (u as u32 + h % 3) / 9 }
+                let k = hash((u * 31 + v * 7) as u32);
+                let outside = u < 0 || v < 0 || u >= w as isize || v >= h as isize;
+                if outside || at(u, v) != 0 || k.is_multiple_of(4) { 0 } else { 1 + (u as u32 + k % 3) / 9 }
             };
             let planes = Grid {
                 width: w,
                 height: h,
                 data: (0..w * h).map(|i| plane((i % w) as isize, (i / w) as isize)).collect(),
             };
-            // One wave of growth by its definition: an unlabelled pixel takes its plane
-            // when a 4-neighbour holds it.
-            let (mut want, mut want_open, mut want_took) = (Vec::new(), vec![false; h], vec![false; h]);
+            // Growth's links by their definition: a pixel with a plane joins at the first
+            // wave when a 4-neighbour holds it, and then when a 4-neighbour of the same
+            // plane has joined.
+            let sides = [(-1, 0, SAME_LEFT), (1, 0, SAME_RIGHT), (0, -1, SAME_ABOVE), (0, 1, SAME_BELOW)];
+            let mut want_links = Vec::new();
             for v in 0..h as isize {
                 for u in 0..w as isize {
                     let p = plane(u, v);
-                    let joins = at(u, v) == 0
-                        && p != 0
-                        && [(-1, 0), (1, 0), (0, -1), (0, 1)].iter().any(|(du, dv)| at(u + du, v + dv) == p);
-                    want.push(if joins { p } else { at(u, v) });
-                    want_open[v as usize] |= !joins && at(u, v) == 0 && p != 0;
-                    want_took[v as usize] |= joins;
+                    let mut flags = 0;
+                    for &(du, dv, same) in &sides {
+                        if p != 0 && at(u + du, v + dv) == p {
+                            flags |= HELD_BESIDE;
+                        }
+                        if p != 0 && plane(u + du, v + dv) == p {
+                            flags |= same;
+                        }
+                    }
+                    want_links.push(flags);
+                }
+            }
+            // A wave from some pixels joined, by its definition.
+            let joined: Vec<u8> = (0..w * h).map(|i| u8::from(hash(i as u32 ^ 0x3c).is_multiple_of(3))).collect();
+            let joined_at = |u: isize, v: isize| {
+                let inside = u >= 0 && v >= 0 && u < w as isize && v < h as isize;
+                inside && joined[v as usize * w + u as usize] == 1
+            };
+            let mut want_wave = Vec::new();
+            for v in 0..h as isize {
+                for u in 0..w as isize {
+                    let k = want_links[v as usize * w + u as usize];
+                    let brought = sides.iter().any(|&(du, dv, same)| k & same != 0 && joined_at(u + du, v + dv));
+                    want_wave.push(u8::from(joined_at(u, v) || brought));
                 }
             }
             // Where a row enters a region (the creases' and joins' scan).
@@ -1282,20 +1326,28 @@ mod tests {
                     }
                 }
             }
-            let (mut got, mut got_entries) = (vec![0u32; w * h], Vec::new());
+            let (mut links, mut wave, mut got_entries) = (vec![0u8; w * h], vec![0u8; w * h], Vec::new());
             let mut mask = vec![0u8; w];
             for v in 0..h {
-                let line = |v: usize| &labels.data[v * w..(v + 1) * w];
-                let around = [line(v.saturating_sub(1)), line(v), line((v + 1).min(h - 1))];
-                let (open, took) = join_row(around, &planes.data[v * w..(v + 1) * w], &mut got[v * w..(v + 1) * w]);
-                assert_eq!((open, took), (want_open[v], want_took[v]), "{w} x {h}, row {v}");
+                let row = v * w..(v + 1) * w;
+                let (labels_around, planes_around) = (rows_around(&labels.data, w, v), rows_around(&planes.data, w, v));
+                join_links(labels_around, planes_around, [v > 0, v + 1 < h], &mut links[row.clone()]);
+                let took = wave_row(rows_around(&joined, w, v), &want_links[row.clone()], &mut wave[row.clone()]);
+                assert_eq!(took, want_wave[row.clone()] != joined[row], "{w} x {h}, row {v}");
                 row_meetings(&labels.data[v * w..(v + 1) * w], Meeting::OtherLabel, &mut mask);
                 for_each_set(&mask, |u| got_entries.push((u, v)));
             }
-            assert_eq!(got, want, "{w} x {h}");
+            assert_eq!(links, want_links, "{w} x {h}");
+            assert_eq!(wave, want_wave, "{w} x {h}");
             assert_eq!(got_entries, entries, "{w} x {h}");
-            let joined = want.iter().zip(&labels.data).filter(|(a, b)| a != b).count();
-            assert!(w * h < 100 || (joined > 20 && entries.len() > 20), "{w} x {h}: borders to find");
+            // Every kind of link, pixels a wave brings in, and borders.
+            let count = |flag: u8| want_links.iter().filter(|&&k| k & flag != 0).count();
+            let brought = want_wave.iter().zip(&joined).filter(|(a, b)| a != b).count();
+            let kinds = [HELD_BESIDE, SAME_LEFT, SAME_RIGHT, SAME_ABOVE, SAME_BELOW].map(count);
+            assert!(
+                w * h < 100 || (kinds.iter().all(|&n| n > 10) && brought > 10 && entries.len() > 20),
+                "{w} x {h}: {kinds:?}, {brought}"
+            );
         }
         // Any non-zero byte counts, in a word and in the tail.
         let mut set = Vec::new();
