@@ -1086,7 +1086,7 @@ mod tests {
                 assert_eq!(seg.pixels.len(), 3);
                 let fits = super::super::cpu::ransac::fit_planes(&seg.points(&[0, 1, 2], &cloud), 32, 0.004);
                 let want = grow_by_sweeps(&seg, &fits, &cloud, dist, waves);
-                // On 2 and 16 threads the waves sweep 2 and 5 blocks of rows.
+                // On 2 and 16 threads, the links found by tasks of rows side by side.
                 for threads in [2, 16] {
                     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
                     let mut on_blocks = Segmentation::from_labels(labels.clone(), 3, 1);
