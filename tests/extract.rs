@@ -876,7 +876,7 @@ fn the_same_pixels_three_times_further_give_the_same_tilt_and_three_times_the_of
 #[test]
 fn a_sample_of_every_k_th_point_stands_for_all_of_them() {
     use polymap::extract::segment::PointSample;
-    use polymap::extract::uncertainty::plane_uncertainty;
+    use polymap::extract::uncertainty::{halves_agreement, plane_uncertainty};
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
     // A 200 x 150 pixel patch of floor 1.5 m ahead, 2 mm of noise along the rays: 30 000
@@ -903,6 +903,11 @@ fn a_sample_of_every_k_th_point_stands_for_all_of_them() {
     for (s, a) in [(sampled.tilt_sigma_rad(), all.tilt_sigma_rad()), (sampled.offset_sigma_m(), all.offset_sigma_m())] {
         assert!((s / a - 1.0).abs() < 0.1, "sample {s:e} vs all {a:e}");
     }
+    // So do the two halves' planes: the noise their angle is held to is all the points'.
+    let halves_all = halves_agreement(&pts, 1, &fit, 0.05).unwrap();
+    let halves_sampled = halves_agreement(&sample.points, sample.stride, &fit, 0.05).unwrap();
+    let (s, a) = (halves_sampled.sigma_rad, halves_all.sigma_rad);
+    assert!((s / a - 1.0).abs() < 0.1, "halves: sample {s:e} vs all {a:e}");
     let small = PointSample::of(&pts[..1000], 2048);
     assert_eq!((small.stride, small.points.len()), (1, 1000), "a small region whole");
 }
@@ -934,7 +939,7 @@ fn a_strip_that_took_in_two_rows_of_the_riser_is_two_surfaces_and_a_clean_one_is
     let bend_of = |pts: &[[f32; 3]]| {
         let fit = ransac::refit(pts, [0.0, -1.0, 0.0], 0.3, 0.01).unwrap();
         assert!(fit.inlier_ratio() > 0.95, "one plane by the inlier test: {fit:?}");
-        (fit, halves_agreement(pts, &fit, 0.01).expect("both halves fix a plane"))
+        (fit, halves_agreement(pts, 1, &fit, 0.01).expect("both halves fix a plane"))
     };
     let (fit, clean) = bend_of(&strip(0));
     assert!(clean.one_surface(MAX_HALVES_BEND_DEG.to_radians()), "{clean:?}");

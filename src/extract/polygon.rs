@@ -205,7 +205,7 @@ pub fn build_polygons(
                     );
                     false
                 }
-                Some(u) => match halves_agreement(&sample.points, fit, dist) {
+                Some(u) => match halves_agreement(&sample.points, sample.stride, fit, dist) {
                     Some(h) if h.one_surface(MAX_HALVES_BEND_DEG.to_radians()) => {
                         p.uncertainty = u;
                         true

@@ -361,8 +361,10 @@ impl HalvesAgreement {
 /// that straddles a crease (a strip of tread seen at the image's edge, with two rows of the
 /// riser below it) breaks that assumption, and its covariance is then far too small: its
 /// halves disagree by many sigmas. None when a half has too few points to fix a plane
-/// (the support is too narrow to test, or to trust).
-pub fn halves_agreement(points: &[[f32; 3]], fit: &PlaneFit, dist: f64) -> Option<HalvesAgreement> {
+/// (the support is too narrow to test, or to trust). `points` are every `stride`-th of
+/// the plane's points, each standing for `stride` (as in `plane_uncertainty`): the halves'
+/// noise is that of all the points, not of the sample's fewer.
+pub fn halves_agreement(points: &[[f32; 3]], stride: usize, fit: &PlaneFit, dist: f64) -> Option<HalvesAgreement> {
     let v = |p: &[f32; 3]| [p[0] as f64, p[1] as f64, p[2] as f64];
     // The inliers and their sum.
     let mut inliers: Vec<[f32; 3]> = Vec::with_capacity(points.len());
@@ -398,7 +400,7 @@ pub fn halves_agreement(points: &[[f32; 3]], fit: &PlaneFit, dist: f64) -> Optio
     }
     let half = |pts: &[[f32; 3]]| {
         let f = super::cpu::ransac::refit(pts, fit.normal_f32(), fit.offset as f32, dist as f32)?;
-        Some((f.normal, plane_uncertainty(pts, 1, &f, dist)?.tilt_sigma_rad()))
+        Some((f.normal, plane_uncertainty(pts, stride, &f, dist)?.tilt_sigma_rad()))
     };
     let ((na, sa), (nb, sb)) = (half(&halves[0])?, half(&halves[1])?);
     Some(HalvesAgreement { angle_rad: na.dot(&nb).clamp(-1.0, 1.0).acos(), sigma_rad: sa.hypot(sb) })
