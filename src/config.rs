@@ -244,13 +244,10 @@ pub enum Backend {
 }
 
 impl std::fmt::Display for Backend {
-    /// As the config names it.
+    /// As the config and the command line name it (clap's lowercase names, serde's too).
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Backend::Auto => "auto",
-            Backend::Gpu => "gpu",
-            Backend::Cpu => "cpu",
-        })
+        use clap::ValueEnum;
+        f.write_str(self.to_possible_value().expect("no variant is skipped").get_name())
     }
 }
 

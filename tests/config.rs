@@ -54,6 +54,15 @@ fn robot_config_loads() {
 }
 
 #[test]
+fn a_backend_displays_as_its_config_value_reads() {
+    for backend in [Backend::Auto, Backend::Gpu, Backend::Cpu] {
+        let c = parse(&format!("[pipeline]\nbackend = \"{backend}\"\n")).expect("the displayed name parses");
+        assert_eq!(c.pipeline.backend, backend);
+    }
+    assert_eq!(Backend::Gpu.to_string(), "gpu");
+}
+
+#[test]
 fn empty_file_is_all_defaults() {
     assert_eq!(parse("").unwrap(), Config::default());
 }

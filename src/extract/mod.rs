@@ -398,10 +398,10 @@ pub fn segment_and_fit(
 }
 
 /// Fits each accepted region's plane again on its grown pixels, and hands back a sample
-/// of those pixels' points for the polygon checks (none for the other regions). Growth gives a region back the band along
-/// its border that edges and closing ate; for a thin strip (a tread cut by the image's
-/// edge, ten rows tall) that band doubles its support across, and the plane fitted without
-/// it can be tilted by a degree.
+/// of those pixels' points for the polygon checks (none for the other regions). Growth
+/// gives a region back the band along its border that edges and closing ate; for a thin
+/// strip (a tread cut by the image's edge, ten rows tall) that band doubles its support
+/// across, and the plane fitted without it can be tilted by a degree.
 fn refit_grown(
     seg: &Segmentation,
     fits: &mut [Option<PlaneFit>],

@@ -455,7 +455,8 @@ fn join_links_portable(
 
 crate::extract::cpu::widest_simd! {
     /// One wave on a row: `joined` (1 or 0) of the rows above, at and below it before the
-    /// wave, `links` the row's `join_links`; the row after the wave into `out`. Whether it took a pixel.
+    /// wave, `links` the row's `join_links`; the row after the wave into `out`. Whether it
+    /// took a pixel.
     fn wave_row(joined: [&[u8]; 3], links: &[u8], out: &mut [u8]) -> bool = wave_row_portable
 }
 
@@ -515,7 +516,7 @@ crate::extract::cpu::widest_simd! {
     fn row_meetings_rows(row: &[u32], same: u32, out: &mut [u8]) = row_meetings_portable
 }
 
-/// Whole rows at a time, as `join_row_portable`.
+/// Whole rows at a time, as `join_links_portable`.
 #[inline(always)]
 fn row_meetings_portable(row: &[u32], same: u32, out: &mut [u8]) {
     let out = &mut out[..row.len()];
@@ -1334,7 +1335,7 @@ mod tests {
                 join_links(labels_around, planes_around, [v > 0, v + 1 < h], &mut links[row.clone()]);
                 let took = wave_row(rows_around(&joined, w, v), &want_links[row.clone()], &mut wave[row.clone()]);
                 assert_eq!(took, want_wave[row.clone()] != joined[row], "{w} x {h}, row {v}");
-                row_meetings(&labels.data[v * w..(v + 1) * w], Meeting::OtherLabel, &mut mask);
+                row_meetings(labels_around[1], Meeting::OtherLabel, &mut mask);
                 for_each_set(&mask, |u| got_entries.push((u, v)));
             }
             assert_eq!(links, want_links, "{w} x {h}");

@@ -28,8 +28,9 @@ const STRAY_SHARE: f64 = 0.005;
 /// Cuts every polygon at the planes of the others that meet it and bound it.
 /// `points[k]` are a sample of the camera-frame points of polygon k's region (a
 /// `PointSample`: a floor's hundred thousand at 640x480 would be counted again for every
-/// plane that crosses it, and every k-th point's share is the share of them all), `meet(a, b)` whether
-/// polygons a and b meet along a crease; `dist` is the inlier distance, m.
+/// plane that crosses it, and every k-th point's share is the share of them all);
+/// `meet(a, b)` is whether polygons a and b meet along a crease; `dist` is the inlier
+/// distance, m.
 pub fn trim_at_neighbour_planes(
     polygons: &mut [Polygon],
     points: &[&[[f32; 3]]],
