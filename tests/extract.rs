@@ -814,7 +814,7 @@ fn a_plane_s_reported_covariance_is_the_spread_of_its_fits_over_noisy_draws() {
             })
             .collect();
         let fit = ransac::refit(&pts, [n.x as f32, n.y as f32, n.z as f32], d as f32, 0.05).unwrap();
-        let u = plane_uncertainty(&pts, 1, &fit, 0.05).expect("a block of points fixes a plane");
+        let (u, _) = plane_uncertainty(&pts, 1, &fit, 0.05).expect("a block of points fixes a plane");
         errors.push(u.error_of(&n, d));
         reported.push(nalgebra::Matrix3::from_fn(|r, c| u.cov[r][c]));
     }
@@ -861,7 +861,7 @@ fn the_same_pixels_three_times_further_give_the_same_tilt_and_three_times_the_of
             })
             .collect();
         let fit = ransac::refit(&pts, [n.x as f32, n.y as f32, n.z as f32], d as f32, 0.05).unwrap();
-        let u = plane_uncertainty(&pts, 1, &fit, 0.05).unwrap();
+        let (u, _) = plane_uncertainty(&pts, 1, &fit, 0.05).unwrap();
         (u.tilt_sigma_rad(), u.offset_sigma_m())
     };
     // The scale comes from the residuals: these grow with the depth (0.2 % steps).
@@ -897,15 +897,15 @@ fn a_sample_of_every_k_th_point_stands_for_all_of_them() {
     assert_eq!(sample.stride, 15);
     assert_eq!(sample.points, pts.iter().step_by(15).copied().collect::<Vec<_>>(), "every 15th point, in order");
     let fit = ransac::refit(&pts, [n.x as f32, n.y as f32, n.z as f32], d as f32, 0.05).unwrap();
-    let all = plane_uncertainty(&pts, 1, &fit, 0.05).unwrap();
-    let sampled = plane_uncertainty(&sample.points, sample.stride, &fit, 0.05).unwrap();
+    let (all, all_cut) = plane_uncertainty(&pts, 1, &fit, 0.05).unwrap();
+    let (sampled, sampled_cut) = plane_uncertainty(&sample.points, sample.stride, &fit, 0.05).unwrap();
     // Unweighted, the sample's sigmas would be sqrt(15) = 3.9 times all the points'.
     for (s, a) in [(sampled.tilt_sigma_rad(), all.tilt_sigma_rad()), (sampled.offset_sigma_m(), all.offset_sigma_m())] {
         assert!((s / a - 1.0).abs() < 0.1, "sample {s:e} vs all {a:e}");
     }
     // So do the two halves' planes: the noise their angle is held to is all the points'.
-    let halves_all = halves_agreement(&pts, 1, &fit, 0.05).unwrap();
-    let halves_sampled = halves_agreement(&sample.points, sample.stride, &fit, 0.05).unwrap();
+    let halves_all = halves_agreement(&pts, 1, &fit, 0.05, &all_cut).unwrap();
+    let halves_sampled = halves_agreement(&sample.points, sample.stride, &fit, 0.05, &sampled_cut).unwrap();
     let (s, a) = (halves_sampled.sigma_rad, halves_all.sigma_rad);
     assert!((s / a - 1.0).abs() < 0.1, "halves: sample {s:e} vs all {a:e}");
     let small = PointSample::of(&pts[..1000], 2048);
@@ -915,7 +915,7 @@ fn a_sample_of_every_k_th_point_stands_for_all_of_them() {
 #[test]
 fn a_strip_that_took_in_two_rows_of_the_riser_is_two_surfaces_and_a_clean_one_is_one() {
     use polymap::extract::polygon::MAX_HALVES_BEND_DEG;
-    use polymap::extract::uncertainty::halves_agreement;
+    use polymap::extract::uncertainty::{halves_agreement, plane_uncertainty};
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
     // A tread 0.3 m below the camera, seen 1 m ahead as a strip 4 cm deep (the image's top
@@ -939,7 +939,8 @@ fn a_strip_that_took_in_two_rows_of_the_riser_is_two_surfaces_and_a_clean_one_is
     let bend_of = |pts: &[[f32; 3]]| {
         let fit = ransac::refit(pts, [0.0, -1.0, 0.0], 0.3, 0.01).unwrap();
         assert!(fit.inlier_ratio() > 0.95, "one plane by the inlier test: {fit:?}");
-        (fit, halves_agreement(pts, 1, &fit, 0.01).expect("both halves fix a plane"))
+        let (_, cut) = plane_uncertainty(pts, 1, &fit, 0.01).expect("the strip fixes a plane");
+        (fit, halves_agreement(pts, 1, &fit, 0.01, &cut).expect("both halves fix a plane"))
     };
     let (fit, clean) = bend_of(&strip(0));
     assert!(clean.one_surface(MAX_HALVES_BEND_DEG.to_radians()), "{clean:?}");

@@ -197,7 +197,7 @@ pub fn build_polygons(
             }
             let dist = cfg.ransac_inlier_distance_m;
             match plane_uncertainty(&sample.points, sample.stride, fit, dist) {
-                Some(u) if u.tilt_sigma_rad() > MAX_TILT_SIGMA_DEG.to_radians() => {
+                Some((u, _)) if u.tilt_sigma_rad() > MAX_TILT_SIGMA_DEG.to_radians() => {
                     tracing::debug!(
                         "polygon of {} px held back: its normal is known to {:.2} deg only",
                         p.pixel_count,
@@ -205,7 +205,7 @@ pub fn build_polygons(
                     );
                     false
                 }
-                Some(u) => match halves_agreement(&sample.points, sample.stride, fit, dist) {
+                Some((u, cut)) => match halves_agreement(&sample.points, sample.stride, fit, dist, &cut) {
                     Some(h) if h.one_surface(MAX_HALVES_BEND_DEG.to_radians()) => {
                         p.uncertainty = u;
                         true

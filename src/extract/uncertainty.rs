@@ -158,12 +158,18 @@ pub fn in_plane_axes(n: &Vector3<f64>) -> Option<[Vector3<f64>; 2]> {
     Some([e1, n.cross(&e1)])
 }
 
-/// The uncertainty of `fit` from the points within `dist` of its plane; None with too few
-/// of them to fix a plane (fewer than 4, or all on a line). `points` are every
-/// `stride`-th of the plane's points (1: all of them; a region's `PointSample`), each
-/// standing for `stride`: its pixels lie on a regular grid, so the sums of every k-th
-/// point times k are those of all, to well under a percent, at the same cost for any size.
-pub fn plane_uncertainty(points: &[[f32; 3]], stride: usize, fit: &PlaneFit, dist: f64) -> Option<PlaneUncertainty> {
+/// The uncertainty of `fit` from the points within `dist` of its plane, and where
+/// `halves_agreement` cuts those inliers; None with too few of them to fix a plane (fewer
+/// than 4, or all on a line). `points` are every `stride`-th of the plane's points (1: all
+/// of them; a region's `PointSample`), each standing for `stride`: its pixels lie on a
+/// regular grid, so the sums of every k-th point times k are those of all, to well under a
+/// percent, at the same cost for any size.
+pub fn plane_uncertainty(
+    points: &[[f32; 3]],
+    stride: usize,
+    fit: &PlaneFit,
+    dist: f64,
+) -> Option<(PlaneUncertainty, HalvesCut)> {
     let n = fit.normal;
     let [e1, e2] = in_plane_axes(&n)?;
     // One pass: a_i = (x, y, -1) with x, y the lever arms along e1, e2, taken from the
@@ -198,8 +204,13 @@ pub fn plane_uncertainty(points: &[[f32; 3]], stride: usize, fit: &PlaneFit, dis
     if !cov.iter().all(|v| v.is_finite()) {
         return None;
     }
+    // H's top left is the inliers' spread in the plane about their centroid: its smaller
+    // eigenvector is the direction they are narrowest along.
+    let spread = SymmetricEigen::new(h.fixed_view::<2, 2>(0, 0).into_owned());
+    let narrow = spread.eigenvectors.column(spread.eigenvalues.imin());
+    let cut = HalvesCut { centre: c, across: e1 * narrow[0] + e2 * narrow[1] };
     let row = |k: usize| [cov[(k, 0)], cov[(k, 1)], cov[(k, 2)]];
-    Some(PlaneUncertainty { centre: c.into(), axes: [e1.into(), e2.into()], cov: [row(0), row(1), row(2)] })
+    Some((PlaneUncertainty { centre: c.into(), axes: [e1.into(), e2.into()], cov: [row(0), row(1), row(2)] }, cut))
 }
 
 /// A fitted plane as `plane_uncertainty` takes its inliers' sums: the inlier distance, and
@@ -356,51 +367,41 @@ impl HalvesAgreement {
     }
 }
 
-/// Cuts the inliers of `fit` in two across their narrowest in-plane direction and fits
-/// each half. The uncertainty of the whole fit assumes one plane plus noise; a region
-/// that straddles a crease (a strip of tread seen at the image's edge, with two rows of the
-/// riser below it) breaks that assumption, and its covariance is then far too small: its
-/// halves disagree by many sigmas. None when a half has too few points to fix a plane
-/// (the support is too narrow to test, or to trust). `points` are every `stride`-th of
-/// the plane's points, each standing for `stride` (as in `plane_uncertainty`): the halves'
-/// noise is that of all the points, not of the sample's fewer.
-pub fn halves_agreement(points: &[[f32; 3]], stride: usize, fit: &PlaneFit, dist: f64) -> Option<HalvesAgreement> {
-    let v = |p: &[f32; 3]| [p[0] as f64, p[1] as f64, p[2] as f64];
-    // The inliers and their sum.
-    let mut inliers: Vec<[f32; 3]> = Vec::with_capacity(points.len());
-    let mut sum = [0.0f64; 3];
+/// Where a plane's inliers are cut in two: through their centroid, across the in-plane
+/// direction they spread least along (a unit vector). `plane_uncertainty` finds it from
+/// the sums it takes anyway.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HalvesCut {
+    pub centre: Vector3<f64>,
+    pub across: Vector3<f64>,
+}
+
+/// Cuts the inliers of `fit` in two at `cut` (from `plane_uncertainty` of the same points
+/// and fit) and fits each half. The uncertainty of the whole fit assumes one plane plus
+/// noise; a region that straddles a crease (a strip of tread seen at the image's edge,
+/// with two rows of the riser below it) breaks that assumption, and its covariance is
+/// then far too small: its halves disagree by many sigmas. None when a half has too few
+/// points to fix a plane (the support is too narrow to test, or to trust). `points` are
+/// every `stride`-th of the plane's points, each standing for `stride` (as in
+/// `plane_uncertainty`): the halves' noise is that of all the points, not of the
+/// sample's fewer.
+pub fn halves_agreement(
+    points: &[[f32; 3]],
+    stride: usize,
+    fit: &PlaneFit,
+    dist: f64,
+    cut: &HalvesCut,
+) -> Option<HalvesAgreement> {
+    // Each inlier to its side of the cut, in order.
+    let (c, across) = (cut.centre, cut.across);
+    let mut halves = [Vec::with_capacity(points.len()), Vec::with_capacity(points.len())];
     for p in points.iter().filter(|p| fit.distance(p) < dist) {
-        inliers.push(*p);
-        let q = v(p);
-        sum = [sum[0] + q[0], sum[1] + q[1], sum[2] + q[2]];
-    }
-    let count = inliers.len().max(1) as f64;
-    let c = [sum[0] / count, sum[1] / count, sum[2] / count];
-    // The scatter's six distinct sums, added point by point in order.
-    let mut s = [0.0f64; 6];
-    for p in &inliers {
-        let q = v(p);
-        let d = [q[0] - c[0], q[1] - c[1], q[2] - c[2]];
-        let products = [d[0] * d[0], d[0] * d[1], d[0] * d[2], d[1] * d[1], d[1] * d[2], d[2] * d[2]];
-        for (s, x) in s.iter_mut().zip(products) {
-            *s += x;
-        }
-    }
-    let scatter = Matrix3::new(s[0], s[1], s[2], s[1], s[3], s[4], s[2], s[4], s[5]);
-    // The in-plane direction of least spread: the middle eigenvector of the scatter.
-    let eig = SymmetricEigen::new(scatter);
-    let mut order = [0, 1, 2];
-    order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
-    let across: Vector3<f64> = eig.eigenvectors.column(order[1]).into();
-    let c = Vector3::from(c);
-    let mut halves = [Vec::with_capacity(inliers.len()), Vec::with_capacity(inliers.len())];
-    for p in &inliers {
-        let below = (Vector3::from(v(p)) - c).dot(&across) < 0.0;
-        halves[usize::from(!below)].push(*p);
+        let q = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+        halves[usize::from((q - c).dot(&across) >= 0.0)].push(*p);
     }
     let half = |pts: &[[f32; 3]]| {
         let f = super::cpu::ransac::refit(pts, fit.normal_f32(), fit.offset as f32, dist as f32)?;
-        Some((f.normal, plane_uncertainty(pts, stride, &f, dist)?.tilt_sigma_rad()))
+        Some((f.normal, plane_uncertainty(pts, stride, &f, dist)?.0.tilt_sigma_rad()))
     };
     let ((na, sa), (nb, sb)) = (half(&halves[0])?, half(&halves[1])?);
     Some(HalvesAgreement { angle_rad: na.dot(&nb).clamp(-1.0, 1.0).acos(), sigma_rad: sa.hypot(sb) })
