@@ -40,7 +40,7 @@ impl<'a> Cloud<'a> {
 
     /// Appends the points of the valid pixels among `pixels` (consecutive indices within
     /// one row), in order: a run with no dropout, the usual case, is back-projected whole.
-    #[inline]
+    #[inline(always)]
     pub fn extend_valid(&self, pixels: Range<usize>, out: &mut Vec<[f32; 3]>) {
         let (z, ray_x, ray_y) = self.row_part(pixels);
         if z.iter().fold(true, |all, &z| all & (z != 0.0)) {
@@ -52,7 +52,7 @@ impl<'a> Cloud<'a> {
 
     /// The depths of consecutive pixels within one row, their columns' ray x / z, and the
     /// row's ray y / z: their points, invalid ones included, are (x z, y z, z).
-    #[inline]
+    #[inline(always)]
     pub fn row_part(&self, pixels: Range<usize>) -> (&[f32], &[f32], f32) {
         let (v, u) = (pixels.start / self.width, pixels.start % self.width);
         let len = pixels.len();

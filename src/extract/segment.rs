@@ -185,9 +185,7 @@ impl Segmentation {
 
     /// Appends the points of region r's valid pixels, run by run.
     fn extend_points(&self, r: usize, cloud: &Cloud, out: &mut Vec<[f32; 3]>) {
-        for run in runs(&self.pixels[r], self.labels.width) {
-            cloud.extend_valid(run.first..run.last + 1, out);
-        }
+        extend_points_of(&self.pixels[r], cloud, out);
     }
 
     /// Splits every region whose fit has an inlier ratio under `min_ratio`: it keeps the
@@ -281,6 +279,19 @@ impl Segmentation {
     fn pixels_from_labels(&mut self) {
         self.pixels.iter_mut().for_each(Vec::clear);
         push_pixels(&self.labels.data, &mut self.pixels);
+    }
+}
+
+crate::extract::cpu::widest_simd! {
+    /// Appends the points of the valid pixels among `pixels` (ascending), run by run.
+    fn extend_points_of(pixels: &[u32], cloud: &Cloud, out: &mut Vec<[f32; 3]>) = extend_points_portable
+}
+
+/// `extend_points_of` at any vector width: a run's points are written whole (`Cloud::extend_valid`).
+#[inline(always)]
+fn extend_points_portable(pixels: &[u32], cloud: &Cloud, out: &mut Vec<[f32; 3]>) {
+    for run in runs(pixels, cloud.width) {
+        cloud.extend_valid(run.first..run.last + 1, out);
     }
 }
 
