@@ -1,8 +1,6 @@
 //! Row-major pixel grids and their connected components, for extraction, the map's
 //! clearing and the evaluation alike.
 
-use std::ops::{BitOr, BitXor};
-
 /// A row-major image of any pixel type.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Grid<T> {
@@ -92,36 +90,41 @@ pub fn leading(holds: impl Fn(usize) -> bool) -> usize {
     no
 }
 
-/// The index of the first of `values` other than `value`, if one is: a 64-byte block at a
-/// time (sixteen labels, 64 flags), each block tested by one OR of XORs, which vectorises
-/// (a search value by value does not). Label runs are tens to hundreds of pixels long, and
-/// so are the runs of a region's inside.
-pub fn first_other<T>(values: &[T], value: T) -> Option<usize>
-where
-    T: Copy + PartialEq + Default + BitXor<Output = T> + BitOr<Output = T>,
-{
-    let block_len = 64 / size_of::<T>();
-    let mut blocks = values.chunks_exact(block_len);
-    for (k, block) in (&mut blocks).enumerate() {
-        if block.iter().fold(T::default(), |any, &x| any | (x ^ value)) != T::default() {
-            return block.iter().position(|&x| x != value).map(|j| block_len * k + j);
+/// The index of the first of `values` other than `value`, if one is: 64 bytes at a time
+/// (sixteen labels, 64 flags), each block compared byte by byte with `value`'s bytes into
+/// a word of bits (`differing_bits`), whose lowest set bit is the first byte that differs,
+/// in the first value that does (a value is equal exactly when its bytes are). Label runs
+/// are tens to hundreds of pixels long, and so are the runs of a region's inside; a search
+/// value by value, or a block's test followed by one, took a step per value.
+pub fn first_other<T: bytemuck::NoUninit + PartialEq>(values: &[T], value: T) -> Option<usize> {
+    const { assert!(64 % size_of::<T>() == 0, "a value's size divides a block") };
+    let size = size_of::<T>();
+    let mut pattern = [0u8; 64];
+    for copy in pattern.chunks_exact_mut(size) {
+        copy.copy_from_slice(bytemuck::bytes_of(&value));
+    }
+    let blocks = bytemuck::cast_slice::<T, u8>(values).chunks_exact(64);
+    let tail = blocks.len() * 64 / size;
+    for (k, block) in blocks.enumerate() {
+        let bits = differing_bits(block.try_into().expect("64 bytes"), &pattern);
+        if bits != 0 {
+            return Some((64 * k + bits.trailing_zeros() as usize) / size);
         }
     }
-    let start = values.len() - blocks.remainder().len();
-    blocks.remainder().iter().position(|&x| x != value).map(|j| start + j)
+    values[tail..].iter().position(|x| *x != value).map(|j| tail + j)
 }
 
 /// Calls `f` with the index of every non-zero byte of `mask`, ascending. A scan whose work
 /// lies on a few pixels of most rows (edges, region borders) marks them in a mask a whole
 /// row at a time, with comparisons that vectorise, then visits only those. The mask is
-/// read 64 bytes at a time into a word of bits, one per byte (`nonzero_bits`), and only
+/// read 64 bytes at a time into a word of bits, one per byte (`differing_bits` from 0), and only
 /// the set bits are visited: testing it eight bytes a word, the loop over the words of a
 /// row with nothing in them was most of a scan's time.
 pub fn for_each_set(mask: &[u8], mut f: impl FnMut(usize)) {
     let blocks = mask.chunks_exact(64);
     let tail = blocks.remainder();
     for (k, block) in blocks.enumerate() {
-        let mut bits = nonzero_bits(block.try_into().expect("64 bytes"));
+        let mut bits = differing_bits(block.try_into().expect("64 bytes"), &[0; 64]);
         while bits != 0 {
             f(64 * k + bits.trailing_zeros() as usize);
             bits &= bits - 1;
@@ -135,22 +138,22 @@ pub fn for_each_set(mask: &[u8], mut f: impl FnMut(usize)) {
     }
 }
 
-/// Bit j set where byte j of `block` is not 0.
+/// Bit j set where byte j of `block` differs from byte j of `pattern`.
 #[inline(always)]
-fn nonzero_bits(block: &[u8; 64]) -> u64 {
+fn differing_bits(block: &[u8; 64], pattern: &[u8; 64]) -> u64 {
     #[cfg(target_arch = "x86_64")]
     {
-        use std::arch::x86_64::{__m128i, _mm_cmpeq_epi8, _mm_loadu_si128, _mm_movemask_epi8, _mm_setzero_si128};
-        // SAFETY: SSE2 is part of x86-64; each load reads 16 of the block's 64 bytes.
-        let zero_bits = |k: usize| unsafe {
-            let v = _mm_loadu_si128(block.as_ptr().add(16 * k) as *const __m128i);
-            _mm_movemask_epi8(_mm_cmpeq_epi8(v, _mm_setzero_si128())) as u16 as u64
+        use std::arch::x86_64::{__m128i, _mm_cmpeq_epi8, _mm_loadu_si128, _mm_movemask_epi8};
+        // SAFETY: SSE2 is part of x86-64; each load reads 16 of the arrays' 64 bytes.
+        let equal_bits = |k: usize| unsafe {
+            let load = |bytes: &[u8; 64]| _mm_loadu_si128(bytes.as_ptr().add(16 * k) as *const __m128i);
+            _mm_movemask_epi8(_mm_cmpeq_epi8(load(block), load(pattern))) as u16 as u64
         };
-        !(zero_bits(0) | zero_bits(1) << 16 | zero_bits(2) << 32 | zero_bits(3) << 48)
+        !(equal_bits(0) | equal_bits(1) << 16 | equal_bits(2) << 32 | equal_bits(3) << 48)
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
-        block.iter().enumerate().fold(0u64, |bits, (j, &b)| bits | u64::from(b != 0) << j)
+        block.iter().zip(pattern).enumerate().fold(0u64, |bits, (j, (b, p))| bits | u64::from(b != p) << j)
     }
 }
 
@@ -273,6 +276,9 @@ mod tests {
                 values[at] = 0;
                 values[len - 1] = 1;
                 assert_eq!(first_other(&values, 7), Some(at), "len {len}, other at {at}");
+                // A label that differs in its top byte only.
+                values[at] = 7 | 1 << 24;
+                assert_eq!(first_other(&values, 7), Some(at), "len {len}, top byte at {at}");
             }
         }
         // Flags: blocks of 64, every length to three blocks and a remainder.
