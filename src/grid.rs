@@ -316,6 +316,29 @@ mod tests {
     }
 
     #[test]
+    fn components_are_the_8_connected_floods_numbered_in_scan_order() {
+        // Random masks, sparse (many small components, joined by diagonals too) to dense
+        // (one that spans the image); images narrower and wider than a block of 64 flags.
+        for (w, h, percent) in [(37, 150, 35), (64, 97, 45), (130, 70, 60), (5, 200, 50), (100, 3, 40)] {
+            let inside: Vec<bool> = (0..w * h)
+                .map(|i| (i as u32).wrapping_mul(0x9e37_79b9).rotate_left(13).wrapping_mul(0x85eb_ca6b) % 100 < percent)
+                .collect();
+            // The oracle: a flood from each pixel no flood has reached yet, in scan order.
+            let (mut want, mut seen, mut count) = (vec![0u32; w * h], vec![false; w * h], 0);
+            for i in 0..w * h {
+                if inside[i] && !seen[i] {
+                    count += 1;
+                    for p in flood(i, w, h, &mut seen, |j| inside[j]) {
+                        want[p as usize] = count as u32;
+                    }
+                }
+            }
+            assert!(count > 3, "{w} x {h}: {count} components");
+            assert_eq!(label_components(&inside, w, h), (want, count), "{w} x {h}, {percent} %");
+        }
+    }
+
+    #[test]
     fn runs_are_the_stretches_of_consecutive_pixels_within_each_row() {
         // Every 7th hash-picked pixel of a 13-wide image left out: runs that end at a row's
         // end and go on at the next row's start must split there. Then runs of every length
