@@ -117,9 +117,9 @@ pub fn first_other<T: bytemuck::NoUninit + PartialEq>(values: &[T], value: T) ->
 /// Calls `f` with the index of every non-zero byte of `mask`, ascending. A scan whose work
 /// lies on a few pixels of most rows (edges, region borders) marks them in a mask a whole
 /// row at a time, with comparisons that vectorise, then visits only those. The mask is
-/// read 64 bytes at a time into a word of bits, one per byte (`differing_bits` from 0), and only
-/// the set bits are visited: testing it eight bytes a word, the loop over the words of a
-/// row with nothing in them was most of a scan's time.
+/// read 64 bytes at a time into a word of bits, one per byte (`differing_bits` from 0),
+/// and only the set bits are visited: tested eight bytes a word, the loop over the empty
+/// words of a row was most of a scan's time.
 pub fn for_each_set(mask: &[u8], mut f: impl FnMut(usize)) {
     let blocks = mask.chunks_exact(64);
     let tail = blocks.remainder();
