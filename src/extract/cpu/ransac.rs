@@ -381,23 +381,7 @@ mod avx2 {
     use std::arch::x86_64::*;
 
     use super::Moments;
-    use crate::extract::cpu::simd::lane_sum;
-
-    /// The x, y and z of the four points at `p` (12 floats).
-    ///
-    /// # Safety
-    /// 12 floats from `p` are in bounds.
-    #[inline]
-    #[target_feature(enable = "avx2")]
-    unsafe fn four_points(p: *const f32) -> [__m128; 3] {
-        // SAFETY: in bounds, as the caller promises; the loads are unaligned ones.
-        let [a, b, c] = unsafe { [_mm_loadu_ps(p), _mm_loadu_ps(p.add(4)), _mm_loadu_ps(p.add(8))] };
-        // a = x0 y0 z0 x1, b = y1 z1 x2 y2, c = z2 x3 y3 z3.
-        let x = _mm_blend_ps::<0b0010>(_mm_blend_ps::<0b0100>(a, b), c); // x0 x3 x2 x1
-        let y = _mm_blend_ps::<0b0100>(_mm_blend_ps::<0b1001>(a, b), c); // y1 y0 y3 y2
-        let z = _mm_blend_ps::<0b1001>(_mm_blend_ps::<0b0010>(a, b), c); // z2 z1 z0 z3
-        [_mm_permute_ps::<0x6C>(x), _mm_permute_ps::<0xB1>(y), _mm_permute_ps::<0xC6>(z)]
-    }
+    use crate::extract::cpu::simd::{four_points, lane_sum};
 
     /// `inlier_moments` of a multiple of four points.
     ///
@@ -474,26 +458,7 @@ mod avx512 {
     use std::arch::x86_64::*;
 
     use super::Moments;
-    use crate::extract::cpu::simd::lane_sum8;
-
-    /// The x, y and z of the eight points at `p` (24 floats).
-    ///
-    /// # Safety
-    /// The CPU has AVX-512 F and VL; 24 floats from `p` are in bounds.
-    #[inline]
-    #[target_feature(enable = "avx512f,avx512vl")]
-    unsafe fn eight_points(p: *const f32) -> [__m256; 3] {
-        // SAFETY: in bounds, as the caller promises; the loads are unaligned ones. The
-        // upper half of `b` is never picked.
-        let (a, b) = unsafe { (_mm512_loadu_ps(p), _mm512_castps256_ps512(_mm256_loadu_ps(p.add(16)))) };
-        // Index k < 16 picks a[k], 16 + k picks b[k]: coordinate c of point i is float 3i + c.
-        let pick = |c: i32| {
-            let index =
-                _mm512_setr_epi32(c, c + 3, c + 6, c + 9, c + 12, c + 15, c + 18, c + 21, 0, 0, 0, 0, 0, 0, 0, 0);
-            _mm512_castps512_ps256(_mm512_permutex2var_ps(a, index, b))
-        };
-        [pick(0), pick(1), pick(2)]
-    }
+    use crate::extract::cpu::simd::{eight_points, lane_sum8};
 
     /// `inlier_moments` of a multiple of eight points.
     ///

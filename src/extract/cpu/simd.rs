@@ -91,6 +91,46 @@ pub(crate) fn lane_sum8(v: std::arch::x86_64::__m512d) -> f64 {
     lane_sum(_mm512_castpd512_pd256(v)) + lane_sum(_mm512_extractf64x4_pd::<1>(v))
 }
 
+/// The x, y and z of the four points at `p` (12 floats of x y z triples): three loads,
+/// then two blends and a permute for each coordinate.
+///
+/// # Safety
+/// The CPU has AVX2; 12 floats from `p` are in bounds.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+pub(crate) unsafe fn four_points(p: *const f32) -> [std::arch::x86_64::__m128; 3] {
+    use std::arch::x86_64::*;
+    // SAFETY: in bounds, as the caller promises; the loads are unaligned ones.
+    let [a, b, c] = unsafe { [_mm_loadu_ps(p), _mm_loadu_ps(p.add(4)), _mm_loadu_ps(p.add(8))] };
+    // a = x0 y0 z0 x1, b = y1 z1 x2 y2, c = z2 x3 y3 z3.
+    let x = _mm_blend_ps::<0b0010>(_mm_blend_ps::<0b0100>(a, b), c); // x0 x3 x2 x1
+    let y = _mm_blend_ps::<0b0100>(_mm_blend_ps::<0b1001>(a, b), c); // y1 y0 y3 y2
+    let z = _mm_blend_ps::<0b1001>(_mm_blend_ps::<0b0010>(a, b), c); // z2 z1 z0 z3
+    [_mm_permute_ps::<0x6C>(x), _mm_permute_ps::<0xB1>(y), _mm_permute_ps::<0xC6>(z)]
+}
+
+/// The x, y and z of the eight points at `p` (24 floats of x y z triples): two loads,
+/// then one permute across both registers for each coordinate.
+///
+/// # Safety
+/// The CPU has AVX-512 F and VL; 24 floats from `p` are in bounds.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx512f,avx512vl")]
+pub(crate) unsafe fn eight_points(p: *const f32) -> [std::arch::x86_64::__m256; 3] {
+    use std::arch::x86_64::*;
+    // SAFETY: in bounds, as the caller promises; the loads are unaligned ones. The
+    // upper half of `b` is never picked.
+    let (a, b) = unsafe { (_mm512_loadu_ps(p), _mm512_castps256_ps512(_mm256_loadu_ps(p.add(16)))) };
+    // Index k < 16 picks a[k], 16 + k picks b[k]: coordinate c of point i is float 3i + c.
+    let pick = |c: i32| {
+        let index = _mm512_setr_epi32(c, c + 3, c + 6, c + 9, c + 12, c + 15, c + 18, c + 21, 0, 0, 0, 0, 0, 0, 0, 0);
+        _mm512_castps512_ps256(_mm512_permutex2var_ps(a, index, b))
+    };
+    [pick(0), pick(1), pick(2)]
+}
+
 /// Defines `$name` to run `$portable` (an `#[inline(always)]` fn) compiled for the
 /// widest level `level()` allows: AVX-512, AVX2, or the baseline target. The loops are
 /// plain Rust either way; only the width of the vectors the compiler may use differs
