@@ -64,11 +64,18 @@ pub fn diffuse(depth: &Grid<f32>, time: f32, steps: u32, kappa: f32) -> Grid<f32
     // Lines a task: the same for every pass of one image on one pool.
     let (rows_a_band, columns_a_stripe) = (lanes_for(u.height), lanes_for(u.width));
     for _ in 0..steps {
-        solve_rows(&mut u, rows_a_band, step, inv_kappa);
-        solve_columns(&u, &mut next, columns_a_stripe, step, inv_kappa);
+        solve_rows(&mut u, rows_a_band, Step { time: step, inv_kappa });
+        solve_columns(&u, &mut next, columns_a_stripe, Step { time: step, inv_kappa });
         std::mem::swap(&mut u.data, &mut next);
     }
     u
+}
+
+/// One semi-implicit step: its time, and 1 / kappa of the conductance.
+#[derive(Clone, Copy)]
+struct Step {
+    time: f32,
+    inv_kappa: f32,
 }
 
 /// Lines solved side by side, one per vector lane: enough to fill AVX2's lanes several
@@ -113,13 +120,13 @@ fn with_scratch<R>(len: usize, f: impl FnOnce(&mut [f32], &mut [f32], &mut [f32]
 /// The row pass, in place (on a non-empty image). Rows are solved `band_rows` at a time: each
 /// band is transposed so its rows run down a block and its pixels of one column lie side by
 /// side; the change and the depth are added as the result is transposed back.
-fn solve_rows(u: &mut Grid<f32>, band_rows: usize, step: f32, inv_kappa: f32) {
+fn solve_rows(u: &mut Grid<f32>, band_rows: usize, step: Step) {
     let w = u.width;
     u.data.par_chunks_mut(w * band_rows).for_each(|band| {
         let lanes = band.len() / w;
         with_scratch(w * lanes, |block, e, out| {
             transpose(band, None, lanes, w, block);
-            solve_down(block, lanes, lanes, step, inv_kappa, e, out);
+            solve_down(block, lanes, lanes, step, e, out, None);
             transpose(out, Some(block), w, lanes, band);
         })
     });
@@ -307,7 +314,7 @@ unsafe fn transpose_avx512(src: &[f32], plus: Option<&[f32]>, rows: usize, cols:
 /// The column pass from `u` (non-empty) into `next`'s values, whatever they were: stripes
 /// of `stripe` columns, read where they lie, each written by the task that solved it. Every
 /// value is written, so none is set beforehand.
-fn solve_columns(u: &Grid<f32>, next: &mut Vec<f32>, stripe: usize, step: f32, inv_kappa: f32) {
+fn solve_columns(u: &Grid<f32>, next: &mut Vec<f32>, stripe: usize, step: Step) {
     let (w, h) = (u.width, u.height);
     next.clear();
     next.reserve(w * h);
@@ -316,14 +323,11 @@ fn solve_columns(u: &Grid<f32>, next: &mut Vec<f32>, stripe: usize, step: f32, i
         let x0 = k * stripe;
         let lanes = stripe.min(w - x0);
         with_scratch(h * lanes, |_, e, out| {
-            solve_down(&u.data[x0..], w, lanes, step, inv_kappa, e, out);
-            for (y, change) in out.chunks_exact(lanes).enumerate() {
-                let at = y * w + x0;
-                // SAFETY: `next` has room for w * h values and outlives the pass; this task
-                // alone writes columns x0..x0 + lanes (the stripes are disjoint), and
-                // nothing reads `next` until the pass is over.
-                unsafe { dst.write_sum(at, change, &u.data[at..at + lanes]) };
-            }
+            // SAFETY: `next` has room for w * h values and outlives the pass; this task
+            // alone writes columns x0..x0 + lanes of its h rows (the stripes are disjoint),
+            // and nothing reads `next` until the pass is over.
+            let into = unsafe { dst.stripe(x0, w) };
+            solve_down(&u.data[x0..], w, lanes, step, e, out, Some(into));
         })
     });
     // SAFETY: the stripes cover every column of every row, so all w * h values are written.
@@ -336,25 +340,31 @@ struct StripeWriter(*mut f32);
 unsafe impl Sync for StripeWriter {}
 
 impl StripeWriter {
-    /// Writes `change + depth`, element by element, to the image from index `at` on: the
-    /// solve's last step and the copy out in one pass.
+    /// The stripe from column `x0` of an image `stride` wide.
     ///
     /// # Safety
-    /// `at + change.len()` is within the image, `depth` is as long as `change`, and no
-    /// other thread touches those values meanwhile.
-    unsafe fn write_sum(&self, at: usize, change: &[f32], depth: &[f32]) {
-        for (k, (&c, &z)) in change.iter().zip(depth).enumerate() {
-            // SAFETY: as the caller promises.
-            unsafe { self.0.add(at + k).write(c + z) };
-        }
+    /// `x0` is within the image.
+    unsafe fn stripe(&self, x0: usize, stride: usize) -> Stripe {
+        // SAFETY: as the caller promises.
+        Stripe { at: unsafe { self.0.add(x0) }, stride }
     }
+}
+
+/// Where a column pass's solve writes its depths: element i of lane k at
+/// `at + i * stride + k`, which no other thread touches during the pass.
+#[derive(Clone, Copy)]
+struct Stripe {
+    at: *mut f32,
+    stride: usize,
 }
 
 super::widest_simd! {
     /// Solves `lanes` lines side by side, each running down: element i of lane k is
-    /// `src[i * stride + k]`, and its change `out[i * lanes + k]` (`e` is the elimination's
-    /// scratch); the caller adds the depth as it writes the result where it goes.
-    fn solve_down(src: &[f32], stride: usize, lanes: usize, step: f32, inv_kappa: f32, e: &mut [f32], out: &mut [f32]) = solve_down_portable
+    /// `src[i * stride + k]` (`e` and `out` are the elimination's scratch). Without `into`,
+    /// its change is left in `out[i * lanes + k]`, and the caller adds the depth as it
+    /// writes the result where it goes; with it, the back substitution adds the depth and
+    /// writes there itself, one pass over the lines fewer.
+    fn solve_down(src: &[f32], stride: usize, lanes: usize, step: Step, e: &mut [f32], out: &mut [f32], into: Option<Stripe>) = solve_down_portable
 }
 
 /// The Thomas algorithm, lane by lane as `solve_line` does it for one line, in the
@@ -364,20 +374,20 @@ fn solve_down_portable(
     src: &[f32],
     stride: usize,
     lanes: usize,
-    step: f32,
-    inv_kappa: f32,
+    step: Step,
     e: &mut [f32],
     out: &mut [f32],
+    into: Option<Stripe>,
 ) {
     // Lane counts known when compiled: a full band's and the last band's of the usual
     // image sizes (240 and 480 rows leave 48 and 32). Their per-lane loops are then whole
     // vectors kept in registers, not loops over arrays on the stack: the solve in 0.75x.
     match lanes {
-        LANES => solve_lanes::<LANES>(src, stride, lanes, step, inv_kappa, e, out),
-        48 => solve_lanes::<48>(src, stride, lanes, step, inv_kappa, e, out),
-        32 => solve_lanes::<32>(src, stride, lanes, step, inv_kappa, e, out),
-        16 => solve_lanes::<16>(src, stride, lanes, step, inv_kappa, e, out),
-        _ => solve_lanes::<0>(src, stride, lanes, step, inv_kappa, e, out),
+        LANES => solve_lanes::<LANES>(src, stride, lanes, step, e, out, into),
+        48 => solve_lanes::<48>(src, stride, lanes, step, e, out, into),
+        32 => solve_lanes::<32>(src, stride, lanes, step, e, out, into),
+        16 => solve_lanes::<16>(src, stride, lanes, step, e, out, into),
+        _ => solve_lanes::<0>(src, stride, lanes, step, e, out, into),
     }
 }
 
@@ -387,10 +397,10 @@ fn solve_lanes<const FIXED: usize>(
     src: &[f32],
     stride: usize,
     lanes: usize,
-    step: f32,
-    inv_kappa: f32,
+    step: Step,
     e: &mut [f32],
     out: &mut [f32],
+    into: Option<Stripe>,
 ) {
     let lanes = if FIXED > 0 { FIXED } else { lanes };
     // Lets the compiler drop the bounds checks of the per-lane arrays.
@@ -406,7 +416,7 @@ fn solve_lanes<const FIXED: usize>(
         if i + 1 < len {
             let q = &src[(i + 1) * stride..(i + 1) * stride + lanes];
             for k in 0..lanes {
-                below[k] = coupling(z[k], q[k], step, inv_kappa);
+                below[k] = coupling(z[k], q[k], step.time, step.inv_kappa);
                 flux_below[k] = below[k] * (q[k] - z[k]);
             }
         } else {
@@ -424,11 +434,29 @@ fn solve_lanes<const FIXED: usize>(
         std::mem::swap(&mut above, &mut below);
         std::mem::swap(&mut flux_above, &mut flux_below);
     }
-    for i in (0..len.saturating_sub(1)).rev() {
-        let (head, tail) = out.split_at_mut((i + 1) * lanes);
-        let (row, next, e_row) = (&mut head[i * lanes..], &tail[..lanes], &e[i * lanes..(i + 1) * lanes]);
+    let Some(into) = into else {
+        for i in (0..len.saturating_sub(1)).rev() {
+            let (head, tail) = out.split_at_mut((i + 1) * lanes);
+            let (row, next, e_row) = (&mut head[i * lanes..], &tail[..lanes], &e[i * lanes..(i + 1) * lanes]);
+            for k in 0..lanes {
+                row[k] += e_row[k] * next[k];
+            }
+        }
+        return;
+    };
+    // The same back substitution, each element's change kept for the one above it, and
+    // the depth added as it is written out (the bits of the two passes it replaces).
+    let mut change = [0.0f32; LANES];
+    for i in (0..len).rev() {
+        let (z, out_row, e_row) =
+            (&src[i * stride..i * stride + lanes], &out[i * lanes..(i + 1) * lanes], &e[i * lanes..(i + 1) * lanes]);
         for k in 0..lanes {
-            row[k] += e_row[k] * next[k];
+            change[k] = if i + 1 < len { out_row[k] + e_row[k] * change[k] } else { out_row[k] };
+        }
+        for k in 0..lanes {
+            // SAFETY: `into` is the solve's own stripe of len rows of lanes values
+            // (`Stripe`), as the column pass hands it over.
+            unsafe { into.at.add(i * into.stride + k).write(change[k] + z[k]) };
         }
     }
 }
