@@ -343,7 +343,8 @@ impl StripeWriter {
     /// The stripe from column `x0` of an image `stride` wide.
     ///
     /// # Safety
-    /// `x0` is within the image.
+    /// The solve handed the stripe writes every row of its lanes from column `x0` on: they
+    /// lie within the image, and no other thread touches them during the pass.
     unsafe fn stripe(&self, x0: usize, stride: usize) -> Stripe {
         // SAFETY: as the caller promises.
         Stripe { at: unsafe { self.0.add(x0) }, stride }
@@ -351,7 +352,8 @@ impl StripeWriter {
 }
 
 /// Where a column pass's solve writes its depths: element i of lane k at
-/// `at + i * stride + k`, which no other thread touches during the pass.
+/// `at + i * stride + k`. Made only by `StripeWriter::stripe`, whose caller vouches for
+/// those values: the solve writes them unchecked.
 #[derive(Clone, Copy)]
 struct Stripe {
     at: *mut f32,
