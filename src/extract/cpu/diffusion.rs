@@ -318,7 +318,7 @@ fn solve_columns(u: &Grid<f32>, next: &mut Vec<f32>, stripe: usize, step: Step) 
     let (w, h) = (u.width, u.height);
     next.clear();
     next.reserve(w * h);
-    let dst = StripeWriter(next.as_mut_ptr());
+    let image = Stripe { at: next.as_mut_ptr(), stride: w };
     (0..w.div_ceil(stripe)).into_par_iter().for_each(|k| {
         let x0 = k * stripe;
         let lanes = stripe.min(w - x0);
@@ -326,7 +326,7 @@ fn solve_columns(u: &Grid<f32>, next: &mut Vec<f32>, stripe: usize, step: Step) 
             // SAFETY: `next` has room for w * h values and outlives the pass; this task
             // alone writes columns x0..x0 + lanes of its h rows (the stripes are disjoint),
             // and nothing reads `next` until the pass is over.
-            let into = unsafe { dst.stripe(x0, w) };
+            let into = unsafe { image.at_column(x0) };
             solve_down(&u.data[x0..], w, lanes, step, e, out, Some(into));
         })
     });
@@ -334,30 +334,28 @@ fn solve_columns(u: &Grid<f32>, next: &mut Vec<f32>, stripe: usize, step: Step) 
     unsafe { next.set_len(w * h) };
 }
 
-/// The pointer through which the column pass's tasks write their own stripes of one image.
-struct StripeWriter(*mut f32);
-// SAFETY: shared only by `solve_columns`' tasks, which write disjoint columns.
-unsafe impl Sync for StripeWriter {}
-
-impl StripeWriter {
-    /// The stripe from column `x0` of an image `stride` wide.
-    ///
-    /// # Safety
-    /// The solve handed the stripe writes every row of its lanes from column `x0` on: they
-    /// lie within the image, and no other thread touches them during the pass.
-    unsafe fn stripe(&self, x0: usize, stride: usize) -> Stripe {
-        // SAFETY: as the caller promises.
-        Stripe { at: unsafe { self.0.add(x0) }, stride }
-    }
-}
-
-/// Where a column pass's solve writes its depths: element i of lane k at
-/// `at + i * stride + k`. Made only by `StripeWriter::stripe`, whose caller vouches for
-/// those values: the solve writes them unchecked.
+/// Where the column pass writes its depths: element i of lane k at `at + i * stride + k`.
+/// `solve_columns` makes one for its whole output image and hands each task the stripe
+/// from its first column (`at_column`); the solve writes through it unchecked.
 #[derive(Clone, Copy)]
 struct Stripe {
     at: *mut f32,
     stride: usize,
+}
+
+// SAFETY: shared only by `solve_columns`' tasks, which write disjoint columns.
+unsafe impl Sync for Stripe {}
+
+impl Stripe {
+    /// The stripe from column `x0` on.
+    ///
+    /// # Safety
+    /// The solve handed the stripe writes every row of its lanes from column `x0` on: they
+    /// lie within the image, and no other thread touches them during the pass.
+    unsafe fn at_column(self, x0: usize) -> Stripe {
+        // SAFETY: as the caller promises.
+        Stripe { at: unsafe { self.at.add(x0) }, ..self }
+    }
 }
 
 super::widest_simd! {
@@ -436,29 +434,25 @@ fn solve_lanes<const FIXED: usize>(
         std::mem::swap(&mut above, &mut below);
         std::mem::swap(&mut flux_above, &mut flux_below);
     }
-    let Some(into) = into else {
-        for i in (0..len.saturating_sub(1)).rev() {
-            let (head, tail) = out.split_at_mut((i + 1) * lanes);
-            let (row, next, e_row) = (&mut head[i * lanes..], &tail[..lanes], &e[i * lanes..(i + 1) * lanes]);
-            for k in 0..lanes {
-                row[k] += e_row[k] * next[k];
-            }
-        }
-        return;
-    };
-    // The same back substitution, each element's change kept for the one above it, and
-    // the depth added as it is written out (the bits of the two passes it replaces).
+    // Back substitution, each element's change kept for the one above it. The row pass
+    // leaves the changes in `out` (it adds the depth as it transposes them back); the
+    // column pass adds the depth and writes the result out here, one pass fewer.
     let mut change = [0.0f32; LANES];
     for i in (0..len).rev() {
-        let (z, out_row, e_row) =
-            (&src[i * stride..i * stride + lanes], &out[i * lanes..(i + 1) * lanes], &e[i * lanes..(i + 1) * lanes]);
+        let (out_row, e_row) = (&mut out[i * lanes..(i + 1) * lanes], &e[i * lanes..(i + 1) * lanes]);
         for k in 0..lanes {
             change[k] = if i + 1 < len { out_row[k] + e_row[k] * change[k] } else { out_row[k] };
         }
-        for k in 0..lanes {
-            // SAFETY: `into` is the solve's own stripe of len rows of lanes values
-            // (`Stripe`), as the column pass hands it over.
-            unsafe { into.at.add(i * into.stride + k).write(change[k] + z[k]) };
+        match into {
+            None => out_row.copy_from_slice(&change[..lanes]),
+            Some(into) => {
+                let z = &src[i * stride..i * stride + lanes];
+                for k in 0..lanes {
+                    // SAFETY: `into` is the solve's own stripe of len rows of lanes values
+                    // (`Stripe`), as the column pass hands it over.
+                    unsafe { into.at.add(i * into.stride + k).write(change[k] + z[k]) };
+                }
+            }
         }
     }
 }
