@@ -265,6 +265,7 @@ pub fn label_components(inside: &[bool], w: usize, h: usize) -> (Vec<u32>, usize
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::extract::cpu::ransac::hash;
 
     #[test]
     fn first_other_is_the_first_value_that_differs() {
@@ -296,12 +297,10 @@ mod tests {
     fn for_each_set_visits_every_non_zero_byte_in_order() {
         // Every length to three blocks of 64 and a remainder; masks from empty to full,
         // with bytes of every value (a set top bit, a lone low bit) and runs across blocks.
-        let mut state = 0x9e37_79b9u32;
+        let mut drawn = 0u32;
         let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            state
+            drawn += 1;
+            hash(drawn)
         };
         for len in 0..200 {
             for density in [0u32, 1, 8, 50, 100] {
@@ -320,9 +319,7 @@ mod tests {
         // Random masks, sparse (many small components, joined by diagonals too) to dense
         // (one that spans the image); images narrower and wider than a block of 64 flags.
         for (w, h, percent) in [(37, 150, 35), (64, 97, 45), (130, 70, 60), (5, 200, 50), (100, 3, 40)] {
-            let inside: Vec<bool> = (0..w * h)
-                .map(|i| (i as u32).wrapping_mul(0x9e37_79b9).rotate_left(13).wrapping_mul(0x85eb_ca6b) % 100 < percent)
-                .collect();
+            let inside: Vec<bool> = (0..w * h).map(|i| hash(i as u32 ^ (w * h) as u32) % 100 < percent).collect();
             // The oracle: a flood from each pixel no flood has reached yet, in scan order.
             let (mut want, mut seen, mut count) = (vec![0u32; w * h], vec![false; w * h], 0);
             for i in 0..w * h {
@@ -344,8 +341,7 @@ mod tests {
         // end and go on at the next row's start must split there. Then runs of every length
         // up to whole rows of 300 (one pixel in 97 left out) and whole images.
         for (w, h, gap) in [(13usize, 11usize, 7), (300, 9, 97), (300, 4, u32::MAX)] {
-            let pixels: Vec<u32> =
-                (0..(w * h) as u32).filter(|&i| !crate::extract::cpu::ransac::hash(i).is_multiple_of(gap)).collect();
+            let pixels: Vec<u32> = (0..(w * h) as u32).filter(|&i| !hash(i).is_multiple_of(gap)).collect();
             check_runs(&pixels, w);
         }
         assert_eq!(runs(&[], 13).count(), 0);
