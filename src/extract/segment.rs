@@ -384,16 +384,19 @@ fn join_waves(labels: &mut Grid<u32>, planes: &Grid<u32>, waves: u32) {
     let mut joined: Vec<u8> = links.iter().map(|&k| k & HELD_BESIDE).collect();
     let mut next = vec![0u8; w * h];
     for _ in 1..waves {
-        let mut changed = false;
-        for (v, (links, next)) in links.chunks_exact(w).zip(next.chunks_exact_mut(w)).enumerate() {
-            changed |= wave_row(rows_around(&joined, w, v), links, next);
-        }
+        // Rows in parallel: a wave reads `joined` and writes `next` alone.
+        let changed = (links.par_chunks_exact(w).zip(next.par_chunks_exact_mut(w)).enumerate())
+            .with_min_len(MIN_BLOCK_ROWS)
+            .map(|(v, (links, next))| wave_row(rows_around(&joined, w, v), links, next))
+            .reduce(|| false, |a, b| a | b);
         std::mem::swap(&mut joined, &mut next);
         if !changed {
             break;
         }
     }
-    take_planes(&joined, &planes.data, &mut labels.data);
+    let block = MIN_BLOCK_ROWS * w;
+    let blocks = labels.data.par_chunks_mut(block).zip(joined.par_chunks(block).zip(planes.data.par_chunks(block)));
+    blocks.for_each(|(labels, (joined, planes))| take_planes(joined, planes, labels));
 }
 
 crate::extract::cpu::widest_simd! {
@@ -490,7 +493,8 @@ fn wave_row_portable([above, row, below]: [&[u8]; 3], links: &[u8], out: &mut [u
 }
 
 /// The fewest rows in a task of the row scans split over threads (`join_waves`' links,
-/// `steps_between`): fewer is too little work to hand to another thread.
+/// waves and planes taken, `steps_between`): fewer is too little work to hand to another
+/// thread.
 const MIN_BLOCK_ROWS: usize = 16;
 
 /// How a labelled pixel meets the last labelled pixel before it along its row or up its
@@ -1098,7 +1102,7 @@ mod tests {
                 assert_eq!(seg.pixels.len(), 3);
                 let fits = super::super::cpu::ransac::fit_planes(&seg.points(&[0, 1, 2], &cloud), 32, 0.004);
                 let want = grow_by_sweeps(&seg, &fits, &cloud, dist, waves);
-                // On 2 and 16 threads, the links found by tasks of rows side by side.
+                // On 2 and 16 threads, the links and the waves found by tasks of rows side by side.
                 for threads in [2, 16] {
                     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
                     let mut on_blocks = Segmentation::from_labels(labels.clone(), 3, 1);
