@@ -11,6 +11,7 @@
 //! - `grow`: regions take back, wave by wave, the border pixels whose raw 3-D point lies
 //!   within the inlier distance of their plane, the nearest plane winning where two meet.
 
+use std::mem::MaybeUninit;
 use std::ops::Range;
 
 use nalgebra::Vector3;
@@ -77,8 +78,8 @@ impl Segmentation {
     /// Regions from component roots, as the GPU's components.wgsl leaves them: each pixel
     /// its component's root index + 1 (a component's root is its first pixel in scan
     /// order), 0 outside any. The components are numbered in scan order, as
-    /// `dense_from_roots` numbers them, but run by run: a per-pixel renumbering pass was
-    /// most of the GPU twin's regions stage.
+    /// `dense_from_roots` numbers them, but run by run (the runs found in bands of rows in
+    /// parallel): a per-pixel renumbering pass was most of the GPU twin's regions stage.
     pub fn from_roots(roots: &Grid<u32>, min_pixels: usize) -> Segmentation {
         thread_local! {
             /// Each root's number, written at the root's own run (the first of its
@@ -88,7 +89,7 @@ impl Segmentation {
         let mut count = 0u32;
         let runs = NUMBER_OF_ROOT.with_borrow_mut(|number| {
             number.resize(number.len().max(roots.data.len()), 0);
-            let runs: Vec<(Range<usize>, u32)> = label_runs(&roots.data)
+            let runs: Vec<(Range<usize>, u32)> = (par_label_runs(roots).into_iter())
                 .map(|(range, root)| {
                     let r = root as usize - 1;
                     if r == range.start {
@@ -108,8 +109,9 @@ impl Segmentation {
     }
 
     /// Regions from the runs of components 1..=count (pixel index ranges in scan order,
-    /// each with its component): sizes, numbers and pixel lists taken run by run, never
-    /// pixel by pixel (a count per pixel waits on the previous pixel's store to its count).
+    /// each with its component): sizes and numbers taken run by run, never pixel by pixel
+    /// (a count per pixel waits on the previous pixel's store to its count), then the
+    /// labels and pixel lists written from the runs in parallel (`write_runs`).
     fn from_runs(
         w: usize,
         h: usize,
@@ -122,21 +124,19 @@ impl Segmentation {
             sizes[l as usize] += range.len();
         }
         let mut region_of = vec![0u32; count + 1];
-        let mut pixels: Vec<Vec<u32>> = Vec::new();
+        let mut regions = 0;
         for l in 1..=count {
             if sizes[l] >= min_pixels {
-                pixels.push(Vec::with_capacity(sizes[l]));
-                region_of[l] = pixels.len() as u32;
+                regions += 1;
+                region_of[l] = regions;
             }
         }
-        let mut labels = vec![0u32; w * h];
-        for (range, l) in runs {
-            let r = region_of[l as usize];
-            if r != 0 {
-                labels[range.clone()].fill(r);
-                pixels[r as usize - 1].extend(range.start as u32..range.end as u32);
-            }
-        }
+        let runs: Vec<(Range<usize>, u32)> = runs.map(|(range, l)| (range, region_of[l as usize])).collect();
+        let mut pixels = vec![Vec::new(); regions as usize];
+        let mut labels = Vec::with_capacity(w * h);
+        write_runs(&runs, &mut pixels, Some(&mut labels.spare_capacity_mut()[..w * h]));
+        // SAFETY: `write_runs` wrote every pixel of the image's labels.
+        unsafe { labels.set_len(w * h) };
         Segmentation { labels: Grid { width: w, height: h, data: labels }, pixels }
     }
 
@@ -274,11 +274,17 @@ impl Segmentation {
         self.pixels_from_labels();
     }
 
-    /// Rebuilds every region's pixel list from the labels: one scan, ascending by
-    /// construction (cheaper than appending each wave of growth and sorting).
+    /// Rebuilds every region's pixel list from the labels, ascending by construction
+    /// (cheaper than appending each wave of growth and sorting): the label runs found in
+    /// bands of rows, the lists written from them, both in parallel. On one thread, one
+    /// pass that writes each run as it finds it (`push_pixels`; two passes cost a third more).
     fn pixels_from_labels(&mut self) {
-        self.pixels.iter_mut().for_each(Vec::clear);
-        push_pixels(&self.labels.data, &mut self.pixels);
+        if rayon::current_num_threads() == 1 {
+            self.pixels.iter_mut().for_each(Vec::clear);
+            push_pixels(&self.labels.data, &mut self.pixels);
+            return;
+        }
+        write_runs(&par_label_runs(&self.labels), &mut self.pixels, None);
     }
 }
 
@@ -605,6 +611,93 @@ fn push_pixels(labels: &[u32], pixels: &mut [Vec<u32>]) {
     for (range, l) in label_runs(labels) {
         pixels[l as usize - 1].extend(range.start as u32..range.end as u32);
     }
+}
+
+/// `label_runs` of an image, found in bands of rows in parallel (a run across a band's
+/// edge comes as two, each band's runs in order).
+fn par_label_runs(labels: &Grid<u32>) -> Vec<(Range<usize>, u32)> {
+    let band = RUN_BAND_ROWS * labels.width.max(1);
+    let bands: Vec<Vec<(Range<usize>, u32)>> = (labels.data.par_chunks(band).enumerate())
+        .map(|(b, labels)| label_runs(labels).map(|(r, l)| (b * band + r.start..b * band + r.end, l)).collect())
+        .collect();
+    bands.concat()
+}
+
+/// Rows of a band in which `par_label_runs` finds label runs as one task.
+const RUN_BAND_ROWS: usize = 32;
+/// The fewest pixels of the image a task of `write_runs` covers.
+const MIN_WRITE_PIXELS: usize = 16 * 1024;
+
+/// Writes each region's pixel list (region l - 1: the pixels of the runs of value l; runs
+/// of value 0 are in none), ascending, and with `labels` the label image (each run's
+/// value, 0 between runs), from `runs`: ascending, disjoint pixel ranges. In parallel:
+/// the runs are cut into tasks of about equal stretches of the image, which count each
+/// region's pixels in their runs, and then each writes its own stretch of each list (the
+/// stretches in task order) and of the labels. Written by one thread, after the parallel
+/// stages before them, the lists and labels were the largest serial step of a frame on
+/// many cores (their scan read labels from other cores' caches).
+fn write_runs(runs: &[(Range<usize>, u32)], pixels: &mut [Vec<u32>], labels: Option<&mut [MaybeUninit<u32>]>) {
+    let n = labels.as_ref().map_or_else(|| runs.last().map_or(0, |(r, _)| r.end), |l| l.len());
+    let tasks = n.div_ceil(MIN_WRITE_PIXELS).clamp(1, 4 * rayon::current_num_threads());
+    // Task k takes the runs starting in its k-th of the image, and the labels from its
+    // first run's start (the image's for the first task) to the next task's.
+    let firsts: Vec<usize> = (0..=tasks).map(|k| runs.partition_point(|(r, _)| r.start < k * n / tasks)).collect();
+    let mut bounds: Vec<usize> = firsts.iter().map(|&f| runs.get(f).map_or(n, |(r, _)| r.start)).collect();
+    bounds[0] = 0;
+    let task_runs: Vec<&[(Range<usize>, u32)]> = firsts.windows(2).map(|f| &runs[f[0]..f[1]]).collect();
+    let counts: Vec<Vec<usize>> = (task_runs.par_iter())
+        .map(|runs| {
+            let mut counts = vec![0; pixels.len()];
+            for (range, l) in runs.iter().filter(|(_, l)| *l != 0) {
+                counts[*l as usize - 1] += range.len();
+            }
+            counts
+        })
+        .collect();
+    let lengths: Vec<usize> = (0..pixels.len()).map(|r| counts.iter().map(|c| c[r]).sum()).collect();
+    for (list, &len) in pixels.iter_mut().zip(&lengths) {
+        list.clear();
+        list.reserve(len);
+    }
+    // Each task's stretch of each list, cut off the lists' fronts in task order, and of the labels.
+    let mut rests: Vec<&mut [MaybeUninit<u32>]> = pixels.iter_mut().map(Vec::spare_capacity_mut).collect();
+    let stretches: Vec<Vec<&mut [MaybeUninit<u32>]>> = (counts.iter())
+        .map(|counts| rests.iter_mut().zip(counts).map(|(rest, &len)| cut_front(rest, len)).collect())
+        .collect();
+    let mut labels_left = labels;
+    let label_stretches: Vec<Option<&mut [MaybeUninit<u32>]>> =
+        (bounds.windows(2)).map(|b| labels_left.as_mut().map(|rest| cut_front(rest, b[1] - b[0]))).collect();
+    let work = task_runs.into_par_iter().zip(stretches).zip(label_stretches).zip(bounds.par_windows(2));
+    work.for_each(|(((runs, mut lists), labels), bounds)| {
+        let mut filled = vec![0; lists.len()];
+        for (range, l) in runs.iter().filter(|(_, l)| *l != 0) {
+            let (r, start) = (*l as usize - 1, range.start as u32);
+            let out = &mut lists[r][filled[r]..filled[r] + range.len()];
+            out.iter_mut().enumerate().for_each(|(k, o)| *o = MaybeUninit::new(start + k as u32));
+            filled[r] += range.len();
+        }
+        if let Some(labels) = labels {
+            // Offsets into this task's stretch of the labels, which starts at bounds[0].
+            let (mut at, base) = (0, bounds[0]);
+            for (range, l) in runs {
+                labels[at..range.start - base].fill(MaybeUninit::new(0));
+                labels[range.start - base..range.end - base].fill(MaybeUninit::new(*l));
+                at = range.end - base;
+            }
+            labels[at..].fill(MaybeUninit::new(0));
+        }
+    });
+    for (list, len) in pixels.iter_mut().zip(lengths) {
+        // SAFETY: the tasks' stretches, each filled by its task's runs, cover the first len.
+        unsafe { list.set_len(len) };
+    }
+}
+
+/// The first `len` values of `rest`, which keeps the others.
+fn cut_front<'a, T>(rest: &mut &'a mut [T], len: usize) -> &'a mut [T] {
+    let (front, back) = std::mem::take(rest).split_at_mut(len);
+    *rest = back;
+    front
 }
 
 /// The stretches of one non-zero label in a label image, in order, with their label.
@@ -1059,6 +1152,48 @@ mod tests {
             cx: w as f64 / 2.0,
             cy: h as f64 / 2.0,
             depth_scale: 0.001,
+        }
+    }
+
+    /// Labels and pixel lists written from runs in parallel (`write_runs`, through
+    /// `from_labels`) and lists rebuilt from the labels (`pixels_from_labels`) are the
+    /// pixel-by-pixel ones, on 1, 2 and 16 threads, on an image of several tasks and bands.
+    #[test]
+    fn lists_and_labels_written_in_parallel_are_the_pixel_by_pixel_ones() {
+        let (w, h, regions) = (300usize, 220usize, 7u32);
+        let mut data = vec![0u32; w * h];
+        let (mut i, mut k) = (0, 0u32);
+        while i < data.len() {
+            let end = (i + 1 + (hash(k) % 150) as usize).min(data.len());
+            data[i..end].fill(hash(k ^ 0x77) % (regions + 1));
+            (i, k) = (end, k + 1);
+        }
+        // Numbered in scan order, as `from_labels` wants them.
+        let mut number = vec![0u32; regions as usize + 1];
+        let mut count = 0;
+        for l in data.iter_mut().filter(|l| **l != 0) {
+            if number[*l as usize] == 0 {
+                count += 1;
+                number[*l as usize] = count;
+            }
+            *l = number[*l as usize];
+        }
+        let mut want = vec![Vec::new(); count as usize];
+        for (i, &l) in data.iter().enumerate().filter(|(_, l)| **l != 0) {
+            want[l as usize - 1].push(i as u32);
+        }
+        assert!(data.len() > 3 * MIN_WRITE_PIXELS && h > 3 * RUN_BAND_ROWS && count == regions);
+        for threads in [1, 2, 16] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| {
+                let labels = Grid { width: w, height: h, data: data.clone() };
+                let mut seg = Segmentation::from_labels(labels, count as usize, 1);
+                assert_eq!(seg.labels.data, data, "{threads} threads");
+                assert_eq!(seg.pixels, want, "{threads} threads");
+                seg.pixels.iter_mut().for_each(|list| list.extend([7, 8, 9]));
+                seg.pixels_from_labels();
+                assert_eq!(seg.pixels, want, "{threads} threads, lists from the labels");
+            });
         }
     }
 
