@@ -63,7 +63,7 @@ impl Segmentation {
     pub fn components(boundary: &Grid<u8>, min_pixels: usize) -> Segmentation {
         let free: Vec<bool> = boundary.data.iter().map(|&b| b == 0).collect();
         let (runs, count) = component_runs(&free, boundary.width, boundary.height);
-        let runs = runs.iter().map(|r| (r.start..r.end, r.label));
+        let runs = runs.iter().map(|r| (r.start..r.end, r.label)).collect();
         Segmentation::from_runs(boundary.width, boundary.height, runs, count, min_pixels)
     }
 
@@ -72,7 +72,7 @@ impl Segmentation {
     /// way in from hand-made labels; frames come through `components` or `from_roots`.
     #[cfg(test)]
     pub fn from_labels(labels: Grid<u32>, count: usize, min_pixels: usize) -> Segmentation {
-        Segmentation::from_runs(labels.width, labels.height, label_runs(&labels.data), count, min_pixels)
+        Segmentation::from_runs(labels.width, labels.height, label_runs(&labels.data).collect(), count, min_pixels)
     }
 
     /// Regions from component roots, as the GPU's components.wgsl leaves them: each pixel
@@ -87,25 +87,24 @@ impl Segmentation {
             static NUMBER_OF_ROOT: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
         }
         let mut count = 0u32;
-        let runs = NUMBER_OF_ROOT.with_borrow_mut(|number| {
+        // Each run's root becomes its component's number, in place.
+        let mut runs = par_label_runs(roots);
+        NUMBER_OF_ROOT.with_borrow_mut(|number| {
             number.resize(number.len().max(roots.data.len()), 0);
-            let runs: Vec<(Range<usize>, u32)> = (par_label_runs(roots).into_iter())
-                .map(|(range, root)| {
-                    let r = root as usize - 1;
-                    if r == range.start {
-                        count += 1;
-                        number[r] = count;
-                    }
-                    // A root with no run of its own (not what the shader leaves) numbers nothing.
-                    (range, number.get(r).copied().unwrap_or(0))
-                })
-                .collect();
+            for (range, root) in &mut runs {
+                let r = *root as usize - 1;
+                if r == range.start {
+                    count += 1;
+                    number[r] = count;
+                }
+                // A root with no run of its own (not what the shader leaves) numbers nothing.
+                *root = number.get(r).copied().unwrap_or(0);
+            }
             for (range, _) in &runs {
                 number[range.start] = 0;
             }
-            runs
         });
-        Segmentation::from_runs(roots.width, roots.height, runs.into_iter(), count as usize, min_pixels)
+        Segmentation::from_runs(roots.width, roots.height, runs, count as usize, min_pixels)
     }
 
     /// Regions from the runs of components 1..=count (pixel index ranges in scan order,
@@ -115,13 +114,13 @@ impl Segmentation {
     fn from_runs(
         w: usize,
         h: usize,
-        runs: impl Iterator<Item = (Range<usize>, u32)> + Clone,
+        mut runs: Vec<(Range<usize>, u32)>,
         count: usize,
         min_pixels: usize,
     ) -> Segmentation {
         let mut sizes = vec![0usize; count + 1];
-        for (range, l) in runs.clone() {
-            sizes[l as usize] += range.len();
+        for (range, l) in &runs {
+            sizes[*l as usize] += range.len();
         }
         let mut region_of = vec![0u32; count + 1];
         let mut regions = 0;
@@ -131,7 +130,10 @@ impl Segmentation {
                 region_of[l] = regions;
             }
         }
-        let runs: Vec<(Range<usize>, u32)> = runs.map(|(range, l)| (range, region_of[l as usize])).collect();
+        // Each run's component becomes its region, in place (0: too small, in none).
+        for (_, l) in &mut runs {
+            *l = region_of[*l as usize];
+        }
         let mut pixels = vec![Vec::new(); regions as usize];
         let mut labels = Vec::with_capacity(w * h);
         write_runs(&runs, &mut pixels, Some(&mut labels.spare_capacity_mut()[..w * h]));
@@ -617,10 +619,9 @@ fn push_pixels(labels: &[u32], pixels: &mut [Vec<u32>]) {
 /// edge comes as two, each band's runs in order).
 fn par_label_runs(labels: &Grid<u32>) -> Vec<(Range<usize>, u32)> {
     let band = RUN_BAND_ROWS * labels.width.max(1);
-    let bands: Vec<Vec<(Range<usize>, u32)>> = (labels.data.par_chunks(band).enumerate())
-        .map(|(b, labels)| label_runs(labels).map(|(r, l)| (b * band + r.start..b * band + r.end, l)).collect())
-        .collect();
-    bands.concat()
+    (labels.data.par_chunks(band).enumerate())
+        .flat_map_iter(|(b, labels)| label_runs(labels).map(move |(r, l)| (b * band + r.start..b * band + r.end, l)))
+        .collect()
 }
 
 /// Rows of a band in which `par_label_runs` finds label runs as one task.
@@ -701,7 +702,7 @@ fn cut_front<'a, T>(rest: &mut &'a mut [T], len: usize) -> &'a mut [T] {
 }
 
 /// The stretches of one non-zero label in a label image, in order, with their label.
-fn label_runs(labels: &[u32]) -> impl Iterator<Item = (Range<usize>, u32)> + Clone + '_ {
+fn label_runs(labels: &[u32]) -> impl Iterator<Item = (Range<usize>, u32)> + '_ {
     let mut i = 0;
     std::iter::from_fn(move || {
         i += first_other(labels.get(i..)?, 0)?;
