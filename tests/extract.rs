@@ -910,6 +910,12 @@ fn a_sample_of_every_k_th_point_stands_for_all_of_them() {
     assert!((s / a - 1.0).abs() < 0.1, "halves: sample {s:e} vs all {a:e}");
     let small = PointSample::of(&pts[..1000], 2048);
     assert_eq!((small.stride, small.points.len()), (1, 1000), "a small region whole");
+    // The points handed over in parts (as a large region's refit gathers them): the same
+    // sample, wherever the cuts fall against the stride.
+    for cuts in [vec![0, 30_000], vec![0, 1, 14, 15, 16, 7000, 29_999, 30_000], vec![0, 0, 16_384, 30_000]] {
+        let parts: Vec<&[[f32; 3]]> = cuts.windows(2).map(|c| &pts[c[0]..c[1]]).collect();
+        assert_eq!(PointSample::of_parts(&parts, 2048), sample, "cut at {cuts:?}");
+    }
 }
 
 #[test]

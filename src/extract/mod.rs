@@ -343,6 +343,11 @@ pub fn extract_with(
 /// gathered and read twice by the refit for nothing.
 const MAX_FIT_POINTS: usize = 8192;
 
+/// A grown region of more pixels than this is refitted in parts of this many, a task
+/// each (`refit_parts`): the floor of a 640x480 frame, a hundred thousand pixels, is
+/// seven.
+const REFIT_PART_PIXELS: usize = 16384;
+
 /// What segmentation hands on: the regions, their pixels, each one's plane if it has one,
 /// and which of them meet along a crease.
 pub type Segmented = (Segmentation, Vec<Region>, Vec<Option<PlaneFit>>, Creases);
@@ -415,9 +420,9 @@ fn refit_grown(
         .into_par_iter()
         .map(|r| {
             let Some(f) = fits[r].filter(|_| accepted[r]) else { return (None, PointSample::default()) };
-            let points = seg.points_of(r, cloud);
-            let refit = cpu::ransac::refit(&points, f.normal_f32(), f.offset as f32, dist);
-            (refit, PointSample::of(&points, MAX_SAMPLE_POINTS))
+            let parts = seg.point_parts(r, cloud, REFIT_PART_PIXELS);
+            let refit = cpu::ransac::refit_parts(&parts, f.normal_f32(), f.offset as f32, dist);
+            (refit, PointSample::of_parts(&parts, MAX_SAMPLE_POINTS))
         })
         .collect();
     refits

@@ -39,12 +39,23 @@ pub const MAX_SAMPLE_POINTS: usize = 2048;
 impl PointSample {
     /// Every stride-th of `points`, the stride the smallest that keeps them to `max`.
     pub fn of(points: &[[f32; 3]], max: usize) -> PointSample {
-        let stride = sample_stride(points.len(), max);
-        if stride == 1 {
-            return PointSample { points: points.to_vec(), stride };
+        PointSample::of_parts(std::slice::from_ref(&points), max)
+    }
+
+    /// `of` the points of these parts, one after another.
+    pub fn of_parts<P: AsRef<[[f32; 3]]>>(parts: &[P], max: usize) -> PointSample {
+        let len = parts.iter().map(|part| part.as_ref().len()).sum();
+        let stride = sample_stride(len, max);
+        let mut sample = Vec::with_capacity(len.div_ceil(stride));
+        // The index of each part's first point among all of them.
+        let mut start = 0;
+        for part in parts {
+            let part = part.as_ref();
+            // The part's first point taken: the first whose index is a multiple of the stride.
+            let skip = (stride - start % stride) % stride;
+            for_each_strided(part.get(skip..).unwrap_or_default(), stride, |p| sample.push(*p));
+            start += part.len();
         }
-        let mut sample = Vec::with_capacity(points.len().div_ceil(stride));
-        for_each_strided(points, stride, |p| sample.push(*p));
         PointSample { points: sample, stride }
     }
 }
@@ -176,6 +187,21 @@ impl Segmentation {
             batch.ranges.push(start..batch.points.len());
         }
         batch
+    }
+
+    /// `points_of` region r in parts, the points of `part_pixels` of its pixels each,
+    /// gathered in parallel tasks.
+    pub fn point_parts(&self, r: usize, cloud: &Cloud, part_pixels: usize) -> Vec<Vec<[f32; 3]>> {
+        let gather = |pixels: &[u32]| {
+            let mut points = Vec::with_capacity(pixels.len());
+            extend_points_of(pixels, cloud, &mut points);
+            points
+        };
+        if self.pixels[r].len() <= part_pixels {
+            vec![gather(&self.pixels[r])]
+        } else {
+            self.pixels[r].par_chunks(part_pixels).map(gather).collect()
+        }
     }
 
     /// Camera-frame points (raw depth, valid pixels only) of region r.
@@ -1325,6 +1351,12 @@ mod tests {
         // The small region whole, after the large one's sample.
         assert_eq!(sampled.points[sampled.ranges[1].clone()], every(1, 1)[..]);
         assert_eq!(sampled.ranges[1].start, sampled.ranges[0].end);
+        // In parts of 100 pixels (cut inside rows and runs) on two threads, or in one.
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let parts = pool.install(|| seg.point_parts(0, &cloud, 100));
+        assert_eq!(parts.len(), 12);
+        assert_eq!(parts.concat(), every(0, 1), "the points in order, dropouts left out");
+        assert_eq!(seg.point_parts(1, &cloud, 100), vec![every(1, 1)], "a small region one part");
     }
 
     #[test]
