@@ -598,6 +598,27 @@ mod tests {
         assert_eq!(plane_through(a, a, c), None, "two equal points");
     }
 
+    /// `count` points of the plane n . p + d = 0, uniform within `half` of its foot along
+    /// two axes in it, point i moved off it along n by `off(i)`.
+    fn points_on_plane<R: rand::Rng>(
+        n: Vector3<f64>,
+        d: f64,
+        count: usize,
+        half: f64,
+        rng: &mut R,
+        off: impl Fn(usize, &mut R) -> f64,
+    ) -> Vec<[f32; 3]> {
+        use rand::RngExt;
+        let (e1, e2) = (n.cross(&Vector3::x()).normalize(), n.cross(&n.cross(&Vector3::x()).normalize()));
+        (0..count)
+            .map(|i| {
+                let off = off(i, rng);
+                let p = -n * d + e1 * rng.random_range(-half..half) + e2 * rng.random_range(-half..half) + n * off;
+                [p.x as f32, p.y as f32, p.z as f32]
+            })
+            .collect()
+    }
+
     #[test]
     fn refit_is_the_least_squares_plane_of_the_inliers_and_counts_their_support() {
         use rand::{RngExt, SeedableRng};
@@ -605,15 +626,10 @@ mod tests {
         // A plane 2 m away with 1 mm noise, a tenth of its points 5 cm off, and sizes that
         // leave every remainder of the lanes; the first points are outliers.
         let (n, d) = (Vector3::new(0.1, -0.8, -0.6).normalize(), 2.0);
-        let (e1, e2) = (n.cross(&Vector3::x()).normalize(), n.cross(&n.cross(&Vector3::x()).normalize()));
         for size in [3usize, 4, 5, 7, 1001, 20_003] {
-            let points: Vec<[f32; 3]> = (0..size)
-                .map(|i| {
-                    let off = if i < 2 || i % 10 == 3 { 0.05 } else { rng.random_range(-0.001..0.001) };
-                    let p = -n * d + e1 * rng.random_range(-0.5..0.5) + e2 * rng.random_range(-0.5..0.5) + n * off;
-                    [p.x as f32, p.y as f32, p.z as f32]
-                })
-                .collect();
+            let points = points_on_plane(n, d, size, 0.5, &mut rng, |i, rng| {
+                if i < 2 || i % 10 == 3 { 0.05 } else { rng.random_range(-0.001..0.001) }
+            });
             let (nf, df) = ([n.x as f32, n.y as f32, n.z as f32], d as f32);
             let fit = refit(&points, nf, df, 0.01);
             // The plain definition: the inliers' centroid and smallest scatter direction.
@@ -651,14 +667,9 @@ mod tests {
         // 50 000 points of a plane 1.7 m away, 2 mm of noise, every seventh 4 cm off it,
         // and the first 3 000 all off it: the first inlier lies in the second part.
         let (n, d) = (Vector3::new(-0.2, -0.7, -0.5).normalize(), 1.7);
-        let (e1, e2) = (n.cross(&Vector3::x()).normalize(), n.cross(&n.cross(&Vector3::x()).normalize()));
-        let points: Vec<[f32; 3]> = (0..50_000)
-            .map(|i| {
-                let off = if i < 3000 || i % 7 == 3 { 0.04 } else { rng.random_range(-0.002..0.002) };
-                let p = -n * d + e1 * rng.random_range(-0.8..0.8) + e2 * rng.random_range(-0.8..0.8) + n * off;
-                [p.x as f32, p.y as f32, p.z as f32]
-            })
-            .collect();
+        let points = points_on_plane(n, d, 50_000, 0.8, &mut rng, |i, rng| {
+            if i < 3000 || i % 7 == 3 { 0.04 } else { rng.random_range(-0.002..0.002) }
+        });
         let (nf, df) = ([n.x as f32, n.y as f32, n.z as f32], d as f32);
         let whole = refit(&points, nf, df, 0.01).expect("a plane");
         // Parts of uneven sizes, one of them empty.
