@@ -192,23 +192,16 @@ impl Segmentation {
     /// `points_of` region r in parts, the points of `part_pixels` of its pixels each,
     /// gathered in parallel tasks.
     pub fn point_parts(&self, r: usize, cloud: &Cloud, part_pixels: usize) -> Vec<Vec<[f32; 3]>> {
-        let gather = |pixels: &[u32]| {
-            let mut points = Vec::with_capacity(pixels.len());
-            extend_points_of(pixels, cloud, &mut points);
-            points
-        };
         if self.pixels[r].len() <= part_pixels {
-            vec![gather(&self.pixels[r])]
+            vec![self.points_of(r, cloud)]
         } else {
-            self.pixels[r].par_chunks(part_pixels).map(gather).collect()
+            self.pixels[r].par_chunks(part_pixels).map(|pixels| points_of_pixels(pixels, cloud)).collect()
         }
     }
 
     /// Camera-frame points (raw depth, valid pixels only) of region r.
     pub fn points_of(&self, r: usize, cloud: &Cloud) -> Vec<[f32; 3]> {
-        let mut points = Vec::with_capacity(self.pixels[r].len());
-        self.extend_points(r, cloud, &mut points);
-        points
+        points_of_pixels(&self.pixels[r], cloud)
     }
 
     /// Appends the points of region r's valid pixels, run by run.
@@ -314,6 +307,13 @@ impl Segmentation {
         }
         write_runs(&par_label_runs(&self.labels), &mut self.pixels, None);
     }
+}
+
+/// The points of the valid pixels among `pixels` (ascending), run by run.
+fn points_of_pixels(pixels: &[u32], cloud: &Cloud) -> Vec<[f32; 3]> {
+    let mut points = Vec::with_capacity(pixels.len());
+    extend_points_of(pixels, cloud, &mut points);
+    points
 }
 
 crate::extract::cpu::widest_simd! {
