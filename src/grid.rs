@@ -13,7 +13,7 @@ pub struct Grid<T> {
 /// the rows in parallel tasks of at least `min_rows`. A task sets its own rows, while
 /// they are in its core's cache: `vec![init; n]` before the loop was a pass of its own
 /// over the whole image, on one thread.
-pub fn par_rows<T: Copy + Send + Sync>(
+pub fn par_rows<T: bytemuck::Pod + Send + Sync>(
     row_len: usize,
     rows: usize,
     init: T,
@@ -23,10 +23,19 @@ pub fn par_rows<T: Copy + Send + Sync>(
     use rayon::prelude::*;
     let n = row_len * rows;
     let mut data: Vec<T> = Vec::with_capacity(n);
+    // Zero (every image but a morphology's identity) is set by memset, whose stores
+    // fill whole cache lines without reading them first; `fill` is a loop of 16-byte
+    // stores here (this generic code is compiled for the baseline CPU).
+    let zero = bytemuck::bytes_of(&init).iter().all(|&b| b == 0);
     if row_len > 0 {
         let tasks = data.spare_capacity_mut()[..n].par_chunks_mut(row_len).enumerate().with_min_len(min_rows);
         tasks.for_each(|(v, row)| {
-            row.fill(std::mem::MaybeUninit::new(init));
+            if zero {
+                // SAFETY: the row's own values; all-zero bytes are a valid T (it is Pod).
+                unsafe { row.as_mut_ptr().write_bytes(0, row.len()) };
+            } else {
+                row.fill(std::mem::MaybeUninit::new(init));
+            }
             // SAFETY: every value of the row was just written, and MaybeUninit<T> has T's layout.
             let row = unsafe { &mut *(row as *mut [std::mem::MaybeUninit<T>] as *mut [T]) };
             fill(v, row);
@@ -266,6 +275,35 @@ pub fn label_components(inside: &[bool], w: usize, h: usize) -> (Vec<u32>, usize
 mod tests {
     use super::*;
     use crate::extract::cpu::ransac::hash;
+
+    #[test]
+    fn par_rows_sets_each_row_to_init_before_its_fill() {
+        // The fill writes every third value of odd rows only: everything else must be init,
+        // whether init is zero (set by memset) or not (set value by value), on any pool.
+        let fill = |v: usize, row: &mut [f32]| {
+            if v % 2 == 1 {
+                row.iter_mut().step_by(3).for_each(|x| *x += v as f32);
+            }
+        };
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            for init in [0.0f32, 1.5, -0.0] {
+                let data = pool.install(|| par_rows(7, 5, init, 2, fill));
+                let want: Vec<f32> = (0..35)
+                    .map(|i| {
+                        let (v, u) = (i / 7, i % 7);
+                        if v % 2 == 1 && u % 3 == 0 { init + v as f32 } else { init }
+                    })
+                    .collect();
+                assert_eq!(
+                    data.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                    want.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                    "init {init}, {threads} threads"
+                );
+            }
+        }
+        assert!(par_rows(0, 3, 1u8, 1, |_, _| {}).is_empty());
+    }
 
     #[test]
     fn first_other_is_the_first_value_that_differs() {
