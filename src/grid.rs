@@ -23,16 +23,18 @@ pub fn par_rows<T: bytemuck::Pod + Send + Sync>(
     use rayon::prelude::*;
     let n = row_len * rows;
     let mut data: Vec<T> = Vec::with_capacity(n);
-    // Zero (every image but a morphology's identity) is set by memset, the C library's
-    // widest stores; `fill` is a loop of 16-byte stores here (this generic code is
-    // compiled for the baseline CPU): 10.8 % of a 640x480 frame's samples, now 5.6 %.
-    let zero = bytemuck::bytes_of(&init).iter().all(|&b| b == 0);
+    // An init of one repeated byte (zero in every image, a byte mask's 1) is set by
+    // memset, the C library's widest stores; `fill` is a loop of 16-byte stores here (this
+    // generic code is compiled for the baseline CPU): 10.8 % of a 640x480 frame's
+    // samples, now 5.6 %.
+    let bytes = bytemuck::bytes_of(&init);
+    let one_byte = bytes.iter().all(|&b| b == bytes[0]).then(|| bytes[0]);
     if row_len > 0 {
         let tasks = data.spare_capacity_mut()[..n].par_chunks_mut(row_len).enumerate().with_min_len(min_rows);
         tasks.for_each(|(v, row)| {
-            if zero {
-                // SAFETY: the row's own values; all-zero bytes are a valid T (it is Pod).
-                unsafe { row.as_mut_ptr().write_bytes(0, row.len()) };
+            if let Some(byte) = one_byte {
+                // SAFETY: the row's own values, each set to init's bytes.
+                unsafe { row.as_mut_ptr().write_bytes(byte, row.len()) };
             } else {
                 row.fill(std::mem::MaybeUninit::new(init));
             }
@@ -279,7 +281,7 @@ mod tests {
     #[test]
     fn par_rows_sets_each_row_to_init_before_its_fill() {
         // The fill writes every third value of odd rows only: everything else must be init,
-        // whether init is zero (set by memset) or not (set value by value), on any pool.
+        // whether init is one repeated byte (set by memset) or not (value by value), on any pool.
         let fill = |v: usize, row: &mut [f32]| {
             if v % 2 == 1 {
                 row.iter_mut().step_by(3).for_each(|x| *x += v as f32);
@@ -304,6 +306,12 @@ mod tests {
                     "init {init}, {threads} threads"
                 );
             }
+        }
+        for init in [0u8, 1, 0xff] {
+            drop(std::hint::black_box(vec![0x5au8; 35]));
+            let data = par_rows(7, 5, init, 2, |v, row| row[v] ^= 0x80);
+            let want: Vec<u8> = (0..35).map(|i| if i % 7 == i / 7 { init ^ 0x80 } else { init }).collect();
+            assert_eq!(data, want, "byte init {init}");
         }
         assert!(par_rows(0, 3, 1u8, 1, |_, _| {}).is_empty());
     }
