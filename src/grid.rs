@@ -316,11 +316,11 @@ mod tests {
         }
         assert!(par_rows(0, 3, 1u8, 1, |_, _| {}).is_empty());
         // A zero-sized value has no byte to repeat: every row is still handed to the fill.
-        let rows_filled = std::sync::atomic::AtomicUsize::new(0);
+        let values_filled = std::sync::atomic::AtomicUsize::new(0);
         let data = par_rows(4, 3, (), 1, |_, row| {
-            rows_filled.fetch_add(row.len(), std::sync::atomic::Ordering::Relaxed);
+            values_filled.fetch_add(row.len(), std::sync::atomic::Ordering::Relaxed);
         });
-        assert_eq!((data.len(), rows_filled.into_inner()), (12, 12));
+        assert_eq!((data.len(), values_filled.into_inner()), (12, 12));
     }
 
     #[test]
