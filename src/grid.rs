@@ -49,6 +49,14 @@ pub fn par_rows<T: bytemuck::Pod + Send + Sync>(
     data
 }
 
+/// Rows v - 1, v and v + 1 of an image `w` wide; beyond its top or bottom, row v stands in
+/// (for a row loop that ORs, ANDs or compares with its neighbours, itself adds nothing).
+pub fn rows_around<T>(data: &[T], w: usize, v: usize) -> [&[T]; 3] {
+    let row = |v: usize| &data[v * w..(v + 1) * w];
+    let last = data.len() / w - 1;
+    [row(v.saturating_sub(1)), row(v), row((v + 1).min(last))]
+}
+
 /// A stretch of consecutive pixels along row `v`: indices `first..=last`, the row
 /// starting at index `row_start`.
 #[derive(Clone, Copy, Debug, PartialEq)]

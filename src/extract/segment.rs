@@ -20,7 +20,7 @@ use rayon::prelude::*;
 use super::Grid;
 use super::cloud::Cloud;
 use super::cpu::ransac::{PlaneFit, PointBatch, for_each_strided, refit, sample_stride, support};
-use crate::grid::{component_runs, first_other, flood, for_each_set, leading, par_rows, runs};
+use crate::grid::{component_runs, first_other, flood, for_each_set, leading, par_rows, rows_around, runs};
 
 /// Every `stride`-th of a region's valid points, in scan order, each standing for
 /// `stride` of them: what the polygon checks read (a plane's covariance and its halves, a
@@ -447,13 +447,6 @@ fn take_planes_portable(joined: &[u8], planes: &[u32], labels: &mut [u32]) {
         let take = u32::from(joined[i] != 0).wrapping_neg();
         labels[i] = (planes[i] & take) | (labels[i] & !take);
     }
-}
-
-/// Rows v - 1, v and v + 1 of an image `w` wide; beyond its top or bottom, row v stands in.
-fn rows_around<T>(data: &[T], w: usize, v: usize) -> [&[T]; 3] {
-    let row = |v: usize| &data[v * w..(v + 1) * w];
-    let last = data.len() / w - 1;
-    [row(v.saturating_sub(1)), row(v), row((v + 1).min(last))]
 }
 
 /// `join_links`' flags: a 4-neighbour holds the pixel's plane's label already.

@@ -7,7 +7,7 @@ use super::ROWS_PER_TASK;
 use super::morphology::{close, closing_passes, morphology_at};
 use super::normals::NormalPlanes;
 use crate::extract::gpu::BoundaryParams;
-use crate::grid::{Grid, par_rows};
+use crate::grid::{Grid, par_rows, rows_around};
 
 /// 1 where the pixel cannot be inside a planar region: the closed edge lines (Canny,
 /// and depth steps to a 4-neighbour larger than `ratio` times the depth), or no normal.
@@ -27,9 +27,8 @@ pub fn boundary(
 ) -> Grid<u8> {
     let (w, h) = (depth.width, depth.height);
     let lines = par_rows(w, h, 0u8, ROWS_PER_TASK, |v, out| {
-        let [above, below] = rows_beside(&depth.data, w, v);
-        let (edges, row) = (&canny.data[v * w..(v + 1) * w], &depth.data[v * w..(v + 1) * w]);
-        edges_and_depth_steps(edges, row, above, below, out, ratio);
+        let [above, row, below] = rows_around(&depth.data, w, v);
+        edges_and_depth_steps(&canny.data[v * w..(v + 1) * w], row, above, below, out, ratio);
     });
     let closed = close(&Grid { width: w, height: h, data: lines }, closing);
     // The normals' validity plane, a row at a time: 0 where the pixel has no normal.
@@ -43,23 +42,15 @@ pub fn boundary(
     // would leak: growing each line pixel into its 4-neighbours (a plus-shaped dilation,
     // in whole rows) seals it.
     let out = par_rows(w, h, 0u8, ROWS_PER_TASK, |v, row| {
-        let [above, below] = rows_beside(&closed.data, w, v);
-        let (line, sealed) = (&closed.data[v * w..(v + 1) * w], &sealed.data[v * w..(v + 1) * w]);
-        plus_or_sealed(line, above, below, sealed, row);
+        let [above, line, below] = rows_around(&closed.data, w, v);
+        plus_or_sealed(line, above, below, &sealed.data[v * w..(v + 1) * w], row);
     });
     Grid { width: w, height: h, data: out }
 }
 
-/// The rows above and below row v of an image `w` wide, empty beyond its top or bottom
-/// (the row kernels then skip that side).
-fn rows_beside<T>(data: &[T], w: usize, v: usize) -> [&[T]; 2] {
-    let row = |v: usize| data.get(v * w..(v + 1) * w).unwrap_or_default();
-    [v.checked_sub(1).map_or(&[][..], row), row(v + 1)]
-}
-
 super::widest_simd! {
     /// One row of the boundary: the lines grown into their 4-neighbours (`line` the row's,
-    /// `above` and `below` the neighbouring rows', empty beyond the image), or `sealed`.
+    /// `above` and `below` the neighbouring rows', as `rows_around` gives them), or `sealed`.
     /// A kernel, as `lines_or_holes` is: as a closure it ran at SSE2 (0.51-0.54 % of a
     /// 640x480 frame's samples on one thread; the kernel 0.36-0.44 %).
     fn plus_or_sealed(line: &[u8], above: &[u8], below: &[u8], sealed: &[u8], out: &mut [u8]) = plus_or_sealed_portable
@@ -100,8 +91,8 @@ fn lines_or_holes_portable(lines: &[u8], valid: &[f32], out: &mut [u8]) {
 
 super::widest_simd! {
     /// 1 in `out` where a Canny edge (`edges`) is, or where the depth steps to a 4-neighbour
-    /// by more than `ratio` times the depth (both valid); `above` and `below` are the
-    /// neighbouring rows, empty beyond the image.
+    /// by more than `ratio` (> 0) times the depth (both valid); `above` and `below` are the
+    /// neighbouring rows, as `rows_around` gives them (the row itself steps nowhere).
     fn edges_and_depth_steps(edges: &[u8], row: &[f32], above: &[f32], below: &[f32], out: &mut [u8], ratio: f32) = edges_and_depth_steps_portable
 }
 
