@@ -11,10 +11,12 @@ use nalgebra::Vector3;
 use polymap::config::PipelineConfig;
 use polymap::extract::cpu::components::{self, components_oracle, dense_from_roots};
 use polymap::extract::cpu::{self, canny, diffusion, normals, ransac};
-use polymap::extract::gpu::Gpu;
-use polymap::extract::{Grid, Images, depth_metres, extract_cpu, extract_gpu};
+use polymap::extract::gpu::{DepthUpload, Gpu};
+use polymap::extract::segment::Segmentation;
+use polymap::extract::{Grid, Images, MIN_REGION_PIXELS, depth_metres, extract_cpu, extract_gpu};
 use polymap::grid::label_components;
 use polymap::sequence::Sequence;
+use polymap::types::{DepthFrame, Intrinsics};
 
 /// One device for the whole test binary: opening one costs more than a frame.
 fn gpu() -> Option<&'static Mutex<Gpu>> {
@@ -51,8 +53,8 @@ fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
 }
 
 /// The GPU's stages of one frame with their images read back.
-fn gpu_images(gpu: &mut Gpu, depth: &Grid<f32>, seq: &Sequence, cfg: &PipelineConfig) -> (Images, Grid<u32>) {
-    let g = gpu.image_stages(depth, &seq.intrinsics, cfg, true).unwrap();
+fn gpu_images(gpu: &mut Gpu, depth: DepthUpload, seq: &Sequence, cfg: &PipelineConfig) -> (Images, Segmentation) {
+    let (g, ()) = gpu.image_stages(depth, &seq.intrinsics, cfg, true, || ()).unwrap();
     (g.images.expect("asked for the images"), g.regions)
 }
 
@@ -68,8 +70,10 @@ fn image_stages_agree_with_the_cpu_twin_on_every_mock_sequence() {
     let cfg = PipelineConfig::default();
     let mut worst_depth = 0.0f32;
     for (name, seq, k) in mock_frames(5) {
-        let depth = depth_metres(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
-        let (g, regions) = gpu_images(&mut gpu, &depth, &seq, &cfg);
+        // The GPU from the raw frame, as a frame runs; the CPU from its metres.
+        let frame = seq.depth(k).unwrap();
+        let depth = depth_metres(&frame, &seq.intrinsics).unwrap();
+        let (g, regions) = gpu_images(&mut gpu, DepthUpload::Raw(&frame), &seq, &cfg);
         let c = cpu::image_stages(&depth, &seq.intrinsics, &cfg, &mut Default::default(), &mut || 0.0);
         let d = max_abs_diff(&g.smoothed.data, &c.smoothed.data);
         // A few ulps of depth (0.5 µm when written): the GPU may fuse multiply-adds.
@@ -87,11 +91,12 @@ fn image_stages_agree_with_the_cpu_twin_on_every_mock_sequence() {
         assert!(c.canny.data.iter().any(|&e| e != 0), "{name} frame {k}: the stairs have edges");
         let share = share_differing(&c.boundary, &g.boundary);
         assert!(share < 0.005, "{name} frame {k}: boundaries differ in {:.3} % of pixels", share * 100.0);
-        // The GPU's regions are the components of its own boundary.
-        let mut labels = regions.data;
-        dense_from_roots(&mut labels);
-        let free: Vec<bool> = g.boundary.data.iter().map(|&b| b == 0).collect();
-        assert_eq!(labels, label_components(&free, g.boundary.width, g.boundary.height).0, "{name} frame {k}: regions");
+        // The GPU's regions, numbered in its mapped readback buffer, are the CPU twin's
+        // regions of the GPU's own boundary, pixel lists and all.
+        let want = Segmentation::components(&g.boundary, MIN_REGION_PIXELS);
+        assert!(want.pixels.len() > 3, "{name} frame {k}: {} regions", want.pixels.len());
+        assert_eq!(regions.labels, want.labels, "{name} frame {k}: region labels");
+        assert_eq!(regions.pixels, want.pixels, "{name} frame {k}: region pixels");
     }
     eprintln!("worst smoothed depth difference {worst_depth:e} m");
 }
@@ -131,12 +136,39 @@ fn an_image_wider_than_the_diffusion_solves_is_refused_not_cut() {
     let Some(gpu) = gpu() else { return };
     let mut gpu = gpu.lock().unwrap_or_else(|e| e.into_inner());
     let seq = Sequence::open("mock_frames/straight_320").unwrap();
+    let cfg = PipelineConfig::default();
     let wide = Grid { width: 2049, height: 8, data: vec![1.5f32; 2049 * 8] };
-    let err = gpu.image_stages(&wide, &seq.intrinsics, &PipelineConfig::default(), false).err().expect("refused");
+    let err = gpu.image_stages(DepthUpload::Metres(&wide), &seq.intrinsics, &cfg, false, || ()).err().expect("refused");
     assert!(err.to_string().contains("2049x8"), "{err}");
     // The device is still good for the next frame.
-    let depth = depth_metres(&seq.depth(0).unwrap(), &seq.intrinsics).unwrap();
-    assert!(gpu.image_stages(&depth, &seq.intrinsics, &PipelineConfig::default(), false).is_ok());
+    let frame = seq.depth(0).unwrap();
+    assert!(gpu.image_stages(DepthUpload::Raw(&frame), &seq.intrinsics, &cfg, false, || ()).is_ok());
+}
+
+#[test]
+fn the_raw_depth_s_metres_are_the_cpu_twin_s_bit_for_bit() {
+    // The conversion alone, from the same raw frame: one product a pixel on both twins.
+    let Some(gpu) = gpu() else { return };
+    let mut gpu = gpu.lock().unwrap_or_else(|e| e.into_inner());
+    let mut valid = 0;
+    for (name, seq, k) in mock_frames(5) {
+        let frame = seq.depth(k).unwrap();
+        let want = depth_metres(&frame, &seq.intrinsics).unwrap();
+        let got = gpu.metres_alone(&frame).unwrap();
+        assert_eq!(got.data.len(), want.data.len(), "{name} frame {k}: pixels");
+        let bits = |d: &[f32]| d.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&got.data), bits(&want.data), "{name} frame {k}: metres");
+        valid += want.data.iter().filter(|&&z| z > 0.0).count();
+    }
+    assert!(valid > 1_000_000, "{valid} valid pixels compared");
+    // An odd pixel count (the last word half padding), the extremes of 16 bits, and a
+    // scale that is not a power of two.
+    let pixels: Vec<u16> = (0..5 * 3).map(|i| [0, 1, 65535, 4000, 12345][i % 5]).collect();
+    let frame = DepthFrame { stamp_ns: 0, width: 5, height: 3, depth_scale: 0.00025, pixels };
+    let intr = Intrinsics { width: 5, height: 3, ..Intrinsics::L515_320X240 };
+    let want = depth_metres(&frame, &intr).unwrap();
+    assert_eq!(gpu.metres_alone(&frame).unwrap().data, want.data, "5 x 3 frame");
+    assert_eq!(want.data[2], 65535.0 * 0.00025f32, "the largest value");
 }
 
 #[test]
@@ -152,7 +184,7 @@ fn normals_and_edges_alone_agree_with_the_cpu_twin_on_the_same_input() {
         let depth = depth_metres(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
         let smoothed =
             diffusion::diffuse(&depth, cfg.diffusion_time as f32, cfg.diffusion_steps, cfg.diffusion_kappa_m as f32);
-        let (g, _) = gpu_images(&mut gpu, &smoothed, &seq, &stages_only);
+        let (g, _) = gpu_images(&mut gpu, DepthUpload::Metres(&smoothed), &seq, &stages_only);
         assert_eq!(g.smoothed.data, smoothed.data, "{name} frame {k}: no steps, no change");
 
         let n = normals::normal_planes(&smoothed, &seq.intrinsics, cfg.normal_kernel);

@@ -12,9 +12,10 @@ use wgpu::util::DeviceExt;
 use super::cpu::morphology::closing_passes;
 use super::cpu::normals::{NormalPlanes, sobel_kernel};
 use super::cpu::ransac::{PointBatch, ScoringBatch};
-use super::{Grid, Images};
+use super::segment::Segmentation;
+use super::{Grid, Images, MIN_REGION_PIXELS};
 use crate::config::PipelineConfig;
-use crate::types::Intrinsics;
+use crate::types::{DepthFrame, Intrinsics};
 
 /// Why the GPU backend could not start or run.
 #[derive(Debug, thiserror::Error)]
@@ -59,6 +60,17 @@ pub struct DiffusionParams {
     /// The step's time.
     pub step: f32,
     pub inv_kappa: f32,
+}
+
+/// The uniform of shaders/metres.wgsl, field by field its `MetresParams`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct MetresParams {
+    pub width: u32,
+    pub height: u32,
+    /// Metres per depth unit (the frame's `depth_scale`).
+    pub scale: f32,
+    pub pad: u32,
 }
 
 /// The uniform of shaders/normals.wgsl, field by field its `NormalsParams`.
@@ -154,6 +166,11 @@ pub struct ShaderFile {
 
 use Access::{Read, ReadWrite, Uniform};
 
+pub const METRES: ShaderFile = ShaderFile {
+    name: "metres",
+    source: include_str!("../../shaders/metres.wgsl"),
+    bindings: &[Uniform, Read, ReadWrite],
+};
 pub const DIFFUSION: ShaderFile = ShaderFile {
     name: "diffusion",
     source: include_str!("../../shaders/diffusion.wgsl"),
@@ -201,8 +218,8 @@ pub const RANSAC: ShaderFile = ShaderFile {
 };
 
 /// Every shader file, for the layout test.
-pub const SHADERS: [&ShaderFile; 9] =
-    [&DIFFUSION, &NORMALS, &GRADIENT, &CLASSIFY, &COMPONENTS, &HYSTERESIS, &MORPHOLOGY, &BOUNDARY, &RANSAC];
+pub const SHADERS: [&ShaderFile; 10] =
+    [&METRES, &DIFFUSION, &NORMALS, &GRADIENT, &CLASSIFY, &COMPONENTS, &HYSTERESIS, &MORPHOLOGY, &BOUNDARY, &RANSAC];
 
 /// A compiled shader file: its group 0 layout and a pipeline per entry point used.
 struct Shader {
@@ -216,11 +233,23 @@ impl Shader {
     }
 }
 
+/// What the image stages start from.
+#[derive(Clone, Copy)]
+pub enum DepthUpload<'a> {
+    /// The sensor's frame as it comes, 16 bits a pixel (checked against the intrinsics by
+    /// the caller), converted to metres on the GPU (shaders/metres.wgsl): half the bytes
+    /// of metres to upload, and the CPU converts its own copy while the GPU works.
+    Raw(&'a DepthFrame),
+    /// Depth in metres: how a test hands the stages its CPU twin's input.
+    Metres(&'a Grid<f32>),
+}
+
 /// The image stages' outputs, read back.
 pub struct ImageStages {
-    /// Root + 1 of each pixel's 8-connected component of non-boundary pixels, 0 on the
-    /// boundary (shaders/components.wgsl; `cpu::components::dense_from_roots` numbers them).
-    pub regions: Grid<u32>,
+    /// The 8-connected components of non-boundary pixels, numbered on the CPU from the
+    /// roots shaders/components.wgsl leaves (`Segmentation::from_roots`) where they were
+    /// read back, in the mapped buffer: no copy of them is made.
+    pub regions: Segmentation,
     /// The intermediate images, when asked for.
     pub images: Option<Images>,
     pub times: GpuTimes,
@@ -231,27 +260,33 @@ pub struct ImageStages {
 /// time as the readback).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct GpuTimes {
-    /// Writing the depth into the GPU's buffer.
+    /// Writing the depth into the GPU's buffer (and the uniforms).
     pub upload: f64,
+    /// The raw depth converted to metres on the GPU (0 for metres uploaded).
+    pub metres: f64,
     pub diffusion: f64,
     pub normals: f64,
     /// Gradient, classes, hysteresis and the closed boundary.
     pub edges: f64,
     /// Connected components of the non-boundary pixels.
     pub regions: f64,
+    /// The CPU numbering the components' roots in the mapped readback buffer.
+    pub numbering: f64,
     /// From the first stage's start to the last one's end: the GPU's time for the
     /// per-pixel stages, the gaps between them included.
     pub busy: f64,
 }
 
-/// The four timed stages of the one submit, in order.
-const TIMED_STAGES: u32 = 4;
+/// The timed stages of the one submit, in order: metres, diffusion, normals, edges, regions.
+const TIMED_STAGES: u32 = 5;
 const TIMESTAMP_BYTES: u64 = 2 * TIMED_STAGES as u64 * 8;
 
 /// Buffers, uniforms and bind groups for one image size, made once.
 struct Frame {
     width: u32,
     height: u32,
+    /// The raw depth, two 16-bit pixels a word.
+    raw: wgpu::Buffer,
     /// Depth in, and after the diffusion's last column pass the smoothed depth, in [0].
     depth: [wgpu::Buffer; 2],
     normals: wgpu::Buffer,
@@ -264,7 +299,8 @@ struct Frame {
     /// Everything read back, one copy after another, then the timestamps.
     readback: wgpu::Buffer,
     /// Uniforms rewritten each frame from the config: rows, columns of the diffusion,
-    /// normals, Canny, the 8 morphology passes, boundary.
+    /// normals, Canny, the 8 morphology passes, boundary; the raw depth's scale.
+    metres_params: wgpu::Buffer,
     diffusion_params: [wgpu::Buffer; 2],
     normals_params: wgpu::Buffer,
     canny_params: wgpu::Buffer,
@@ -276,6 +312,7 @@ struct Frame {
 }
 
 struct FrameGroups {
+    metres: wgpu::BindGroup,
     diffusion: [wgpu::BindGroup; 2],
     normals: wgpu::BindGroup,
     gradient: wgpu::BindGroup,
@@ -293,6 +330,7 @@ pub struct Gpu {
     device: wgpu::Device,
     queue: wgpu::Queue,
     pub info: wgpu::AdapterInfo,
+    metres: Shader,
     diffusion: Shader,
     normals: Shader,
     gradient: Shader,
@@ -410,6 +448,7 @@ impl Gpu {
         // A shader the driver rejects is an error to report, not wgpu's default panic.
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let gpu = Gpu {
+            metres: compile(&METRES, &["main"]),
             diffusion: compile(&DIFFUSION, &["main"]),
             normals: compile(&NORMALS, &["main"]),
             gradient: compile(&GRADIENT, &["main"]),
@@ -481,14 +520,31 @@ impl Gpu {
         })
     }
 
-    /// Submits `encoder`, waits for the GPU, and reports a validation error as `Dispatch`.
+    /// Submits `encoder` and reports a validation error as `Dispatch`. Does not wait for
+    /// the GPU: `map` does, so the CPU can work in between.
     fn submit(&self, encoder: wgpu::CommandEncoder, scope: wgpu::ErrorScopeGuard) -> Result<(), GpuError> {
         self.queue.submit([encoder.finish()]);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Dispatch(e.to_string()));
         }
-        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Dispatch(e.to_string()))?;
         Ok(())
+    }
+
+    /// Writes a raw depth frame (16-bit values, two a word, the first in the low half on
+    /// the little-endian hosts wgpu runs on) and its scale for shaders/metres.wgsl. A
+    /// write is whole words: an odd pixel count's last word is padded.
+    fn upload_raw(&self, frame: &DepthFrame) {
+        let f = self.frame.as_ref().expect("frame_for before");
+        let bytes: &[u8] = bytemuck::cast_slice(&frame.pixels);
+        let (whole, last) = bytes.split_at(bytes.len() / 4 * 4);
+        self.queue.write_buffer(&f.raw, 0, whole);
+        if !last.is_empty() {
+            let mut word = [0u8; 4];
+            word[..last.len()].copy_from_slice(last);
+            self.queue.write_buffer(&f.raw, whole.len() as u64, &word);
+        }
+        let params = MetresParams { width: frame.width, height: frame.height, scale: frame.depth_scale as f32, pad: 0 };
+        self.queue.write_buffer(&f.metres_params, 0, bytemuck::bytes_of(&params));
     }
 
     /// Maps `staging` (filled by the submit just done), hands its first `bytes` to `read`, unmaps.
@@ -534,6 +590,7 @@ impl Gpu {
         let n = width as u64 * height as u64;
         let image = |label: &str, bytes_per_pixel: u64| self.buffer(label, n * bytes_per_pixel, IMAGE);
         let depth = [image("depth a", 4), image("depth b", 4)];
+        let raw = self.buffer("raw depth", n.div_ceil(2) * 4, IMAGE);
         let normals = image("normals", 12);
         let (magnitude, sector, class) = (image("magnitude", 4), image("sector", 4), image("class", 4));
         let (parent, edge_labels, strong, edges) =
@@ -549,6 +606,7 @@ impl Gpu {
             wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         );
         let zeros = |bytes: usize| self.uniform(&vec![0u8; bytes]);
+        let metres_params = zeros(size_of::<MetresParams>());
         let diffusion_params = [zeros(size_of::<DiffusionParams>()), zeros(size_of::<DiffusionParams>())];
         let normals_params = zeros(size_of::<NormalsParams>());
         let canny_params = zeros(size_of::<CannyParams>());
@@ -563,6 +621,7 @@ impl Gpu {
         let [a, b] = &scratch;
         let morphology_io = [(&lines, a), (a, b), (b, a), (a, &closed), (&holes, a), (a, b), (b, a), (a, &sealed)];
         let groups = FrameGroups {
+            metres: self.bind(&self.metres, &[&metres_params, &raw, &depth[0]]),
             diffusion: [
                 self.bind(&self.diffusion, &[&diffusion_params[0], &depth[0], &depth[1]]),
                 self.bind(&self.diffusion, &[&diffusion_params[1], &depth[1], &depth[0]]),
@@ -601,6 +660,7 @@ impl Gpu {
         self.frame = Some(Frame {
             width,
             height,
+            raw,
             depth,
             normals,
             class,
@@ -609,6 +669,7 @@ impl Gpu {
             regions,
             strong,
             readback,
+            metres_params,
             diffusion_params,
             normals_params,
             canny_params,
@@ -684,15 +745,16 @@ impl Gpu {
 
     /// Copies `outputs` one after another into the readback buffer (and, for a `timed`
     /// submit on an adapter with timestamps, the stages' timestamps after them), submits,
-    /// and hands the words read back to `read`.
-    fn submit_and_read<T>(
+    /// runs `beside` on the CPU while the GPU works, and hands the words read back to `read`.
+    fn submit_and_read<T, B>(
         &self,
         mut encoder: wgpu::CommandEncoder,
         scope: wgpu::ErrorScopeGuard,
         outputs: &[(&wgpu::Buffer, u64)],
         timed: bool,
+        beside: impl FnOnce() -> B,
         read: impl FnOnce(&[u32], Option<&[u64]>) -> T,
-    ) -> Result<T, GpuError> {
+    ) -> Result<(T, B), GpuError> {
         let f = self.frame.as_ref().expect("frame_for before");
         let mut at = 0;
         for (buffer, bytes) in outputs {
@@ -704,27 +766,35 @@ impl Gpu {
             encoder.copy_buffer_to_buffer(resolved, 0, &f.readback, at, TIMESTAMP_BYTES);
         });
         self.submit(encoder, scope)?;
+        let beside = beside();
         let bytes = at + if stamped.is_some() { TIMESTAMP_BYTES } else { 0 };
-        self.map(&f.readback, bytes, |data| {
+        let out = self.map(&f.readback, bytes, |data| {
             let (words, stamps) = data.split_at(at as usize);
             // The stamps sit at a multiple of 4 bytes: copy them out rather than cast in place.
             let stamps: Vec<u64> =
                 stamps.chunks_exact(8).map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes"))).collect();
             read(bytemuck::cast_slice(words), stamped.map(|_| stamps.as_slice()))
-        })
+        })?;
+        Ok((out, beside))
     }
 
-    /// The per-pixel stages of one depth image (m), in one submit: diffusion, normals,
-    /// Canny with hysteresis, the closed boundary, and the connected regions inside it.
-    /// One readback: the region labels, and with `images` the intermediate images too.
-    pub fn image_stages(
+    /// The per-pixel stages of one depth image, in one submit: the raw depth to metres,
+    /// diffusion, normals, Canny with hysteresis, the closed boundary, and the connected
+    /// regions inside it. One readback: the region roots, numbered where they lie, and with
+    /// `images` the intermediate images too. `beside` runs on the CPU while the GPU works
+    /// (the frame's conversion to metres for the CPU's own stages), and its result comes back.
+    pub fn image_stages<B>(
         &mut self,
-        depth: &Grid<f32>,
+        depth: DepthUpload,
         intr: &Intrinsics,
         cfg: &PipelineConfig,
         images: bool,
-    ) -> Result<ImageStages, GpuError> {
-        let (w, h) = (depth.width as u32, depth.height as u32);
+        beside: impl FnOnce() -> B,
+    ) -> Result<(ImageStages, B), GpuError> {
+        let (w, h) = match depth {
+            DepthUpload::Raw(frame) => (frame.width, frame.height),
+            DepthUpload::Metres(depth) => (depth.width as u32, depth.height as u32),
+        };
         if w.max(h) > DIFFUSION_MAX_LINE {
             return Err(GpuError::TooLarge { width: w, height: h });
         }
@@ -732,7 +802,10 @@ impl Gpu {
         let mut lap = super::stopwatch();
         self.frame_for(w, h);
         let f = self.frame.as_ref().expect("made above");
-        self.queue.write_buffer(&f.depth[0], 0, bytemuck::cast_slice(&depth.data));
+        match depth {
+            DepthUpload::Raw(frame) => self.upload_raw(frame),
+            DepthUpload::Metres(depth) => self.queue.write_buffer(&f.depth[0], 0, bytemuck::cast_slice(&depth.data)),
+        }
         self.write_uniforms(w, h, Some(intr), cfg);
         let upload = lap();
 
@@ -748,14 +821,17 @@ impl Gpu {
         let steps: Vec<Dispatch> = (0..diffusion_steps(cfg))
             .flat_map(|_| [(diffuse, &g.diffusion[0], [h, 1]), (diffuse, &g.diffusion[1], [w, 1])])
             .collect();
-        Self::pass(&mut encoder, set, 0, &steps);
-        Self::pass(&mut encoder, set, 1, &[(self.normals.entry("main"), &g.normals, size)]);
+        // Metres uploaded: an empty pass, so that every timestamp is written.
+        let metres = [(self.metres.entry("main"), &g.metres, size)];
+        Self::pass(&mut encoder, set, 0, if matches!(depth, DepthUpload::Raw(_)) { &metres } else { &[] });
+        Self::pass(&mut encoder, set, 1, &steps);
+        Self::pass(&mut encoder, set, 2, &[(self.normals.entry("main"), &g.normals, size)]);
         let mut edges =
             vec![(self.gradient.entry("main"), &g.gradient, size), (self.classify.entry("main"), &g.classify, size)];
         edges.extend(self.hysteresis_dispatches(size));
         edges.extend(self.boundary_dispatches(size));
-        Self::pass(&mut encoder, set, 2, &edges);
-        Self::pass(&mut encoder, set, 3, &self.components_dispatches(&g.regions, size));
+        Self::pass(&mut encoder, set, 3, &edges);
+        Self::pass(&mut encoder, set, 4, &self.components_dispatches(&g.regions, size));
 
         let mut outputs = vec![(&f.regions, n * 4)];
         if images {
@@ -767,27 +843,32 @@ impl Gpu {
         }
         let period_ms = self.queue.get_timestamp_period() as f64 * 1e-6;
         let mut times = GpuTimes { upload, ..Default::default() };
-        let (regions, images) = self.submit_and_read(encoder, scope, &outputs, true, |words, stamps| {
-            if let Some(ticks) = stamps {
-                let ms = |k: usize| ticks[2 * k + 1].saturating_sub(ticks[2 * k]) as f64 * period_ms;
-                [times.diffusion, times.normals, times.edges, times.regions] = [ms(0), ms(1), ms(2), ms(3)];
-                times.busy = ticks[2 * TIMED_STAGES as usize - 1].saturating_sub(ticks[0]) as f64 * period_ms;
-            }
-            let floats = |k: usize, per: usize| bytemuck::cast_slice::<u32, f32>(&words[k * n..(k + per) * n]);
-            let bytes = |k: usize| words[k * n..(k + 1) * n].iter().map(|&b| b as u8).collect::<Vec<u8>>();
-            let images = images.then(|| Images {
-                smoothed: grid(w, h, floats(1, 1).to_vec()),
-                normals: NormalPlanes::of(&grid(
-                    w,
-                    h,
-                    floats(2, 3).chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
-                )),
-                canny: grid(w, h, bytes(5)),
-                boundary: grid(w, h, bytes(6)),
-            });
-            (grid(w, h, words[..n].to_vec()), images)
-        })?;
-        Ok(ImageStages { regions, images, times })
+        let ((regions, images), beside) =
+            self.submit_and_read(encoder, scope, &outputs, true, beside, |words, stamps| {
+                if let Some(ticks) = stamps {
+                    let ms = |k: usize| ticks[2 * k + 1].saturating_sub(ticks[2 * k]) as f64 * period_ms;
+                    [times.metres, times.diffusion, times.normals, times.edges, times.regions] =
+                        [ms(0), ms(1), ms(2), ms(3), ms(4)];
+                    times.busy = ticks[2 * TIMED_STAGES as usize - 1].saturating_sub(ticks[0]) as f64 * period_ms;
+                }
+                let floats = |k: usize, per: usize| bytemuck::cast_slice::<u32, f32>(&words[k * n..(k + per) * n]);
+                let bytes = |k: usize| words[k * n..(k + 1) * n].iter().map(|&b| b as u8).collect::<Vec<u8>>();
+                let images = images.then(|| Images {
+                    smoothed: grid(w, h, floats(1, 1).to_vec()),
+                    normals: NormalPlanes::of(&grid(
+                        w,
+                        h,
+                        floats(2, 3).chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+                    )),
+                    canny: grid(w, h, bytes(5)),
+                    boundary: grid(w, h, bytes(6)),
+                });
+                let mut lap = super::stopwatch();
+                let regions = Segmentation::from_roots(&words[..n], w, MIN_REGION_PIXELS);
+                times.numbering = lap();
+                (regions, images)
+            })?;
+        Ok((ImageStages { regions, images, times }, beside))
     }
 
     /// Runs `dispatches` alone on inputs written into the frame's buffers, and reads `output` back.
@@ -806,7 +887,25 @@ impl Gpu {
         let mut encoder = self.device.create_command_encoder(&Default::default());
         encoder.clear_buffer(&f.strong, 0, None);
         Self::pass(&mut encoder, None, 0, dispatches);
-        self.submit_and_read(encoder, scope, &[(output, bytes)], false, |words, _| words.to_vec())
+        let (words, ()) =
+            self.submit_and_read(encoder, scope, &[(output, bytes)], false, || (), |words, _| words.to_vec())?;
+        Ok(words)
+    }
+
+    /// The raw depth's conversion to metres alone on the GPU: the stage's GPU-vs-CPU test.
+    pub fn metres_alone(&mut self, frame: &DepthFrame) -> Result<Grid<f32>, GpuError> {
+        let (w, h) = (frame.width, frame.height);
+        self.frame_for(w, h);
+        self.upload_raw(frame);
+        let f = self.frame.as_ref().expect("made above");
+        let size = [w.div_ceil(16), h.div_ceil(16)];
+        let words = self.stage_alone(
+            &[],
+            &[(self.metres.entry("main"), &f.groups.metres, size)],
+            &f.depth[0],
+            frame.pixels.len() as u64 * 4,
+        )?;
+        Ok(Grid { width: w as usize, height: h as usize, data: words.into_iter().map(f32::from_bits).collect() })
     }
 
     /// Hysteresis alone on the GPU, from classify's classes: the stage's GPU-vs-CPU test.
@@ -1019,6 +1118,12 @@ mod tests {
             "MorphologyParams",
             fields!(MorphologyParams { width: u32, height: u32, radius: u32, axis: u32, all: u32, outside: u32 }),
             size_of::<MorphologyParams>(),
+        );
+        assert_declared_as(
+            METRES.source,
+            "MetresParams",
+            fields!(MetresParams { width: u32, height: u32, scale: f32, pad: u32 }),
+            size_of::<MetresParams>(),
         );
         assert_declared_as(
             BOUNDARY.source,

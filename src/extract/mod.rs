@@ -45,7 +45,8 @@ pub enum ExtractError {
 /// Milliseconds spent in each stage of one frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct StageTimes {
-    /// Depth units to metres, and on the GPU writing them into its buffer.
+    /// On the CPU, depth units to metres; on the GPU, writing the raw depth into its
+    /// buffer and its conversion there (the CPU's own conversion overlaps the GPU's work).
     pub upload: f64,
     pub diffusion: f64,
     pub normals: f64,
@@ -54,9 +55,9 @@ pub struct StageTimes {
     /// Connected components of the pixels inside the boundary, numbered (on the GPU
     /// twin: the components' GPU time and the CPU's numbering of the roots read back).
     pub regions: f64,
-    /// GPU only: from the upload to the labels on the CPU, less the stages' GPU time:
-    /// the submit, waiting, the copy and mapping (all of it where the adapter has no
-    /// timestamps, the stages then reading 0).
+    /// GPU only: from the upload to the numbered regions on the CPU, less the stages' GPU
+    /// time and the numbering: the submit, waiting and mapping (all of it where the adapter
+    /// has no timestamps, the stages then reading 0).
     pub readback: f64,
     /// Region clean-up (splits, joins, growth) and outlines.
     pub contours: f64,
@@ -93,10 +94,22 @@ pub struct Images {
 }
 
 /// Smallest region worth a plane fit, pixels (the area test comes after the fit).
-const MIN_REGION_PIXELS: usize = 30;
+pub const MIN_REGION_PIXELS: usize = 30;
 
 /// Depth units to metres (0 stays invalid), checking the frame against the intrinsics.
 pub fn depth_metres(frame: &DepthFrame, intr: &Intrinsics) -> Result<Grid<f32>, ExtractError> {
+    check_frame(frame, intr)?;
+    let s = frame.depth_scale as f32;
+    Ok(Grid {
+        width: intr.width as usize,
+        height: intr.height as usize,
+        data: frame.pixels.iter().map(|&d| d as f32 * s).collect(),
+    })
+}
+
+/// Whether a frame is one the stages can take: the intrinsics' size, as many pixels, and
+/// a positive, finite depth scale.
+fn check_frame(frame: &DepthFrame, intr: &Intrinsics) -> Result<(), ExtractError> {
     if frame.width != intr.width || frame.height != intr.height || frame.pixels.len() != intr.pixel_count() {
         return Err(ExtractError::SizeMismatch {
             got_w: frame.width,
@@ -109,12 +122,7 @@ pub fn depth_metres(frame: &DepthFrame, intr: &Intrinsics) -> Result<Grid<f32>, 
     if !(frame.depth_scale.is_finite() && frame.depth_scale > 0.0) {
         return Err(ExtractError::BadDepthScale(frame.depth_scale));
     }
-    let s = frame.depth_scale as f32;
-    Ok(Grid {
-        width: intr.width as usize,
-        height: intr.height as usize,
-        data: frame.pixels.iter().map(|&d| d as f32 * s).collect(),
-    })
+    Ok(())
 }
 
 /// Which twin runs the stages.
@@ -299,30 +307,34 @@ pub fn extract_with(
     let mut times = StageTimes::default();
     let t0 = Instant::now();
     let mut lap = stopwatch();
-    let depth = depth_metres(frame, intr)?;
-    times.upload = lap();
-    let (images, seg, cloud, mut gpu) = match twin {
+    let (images, seg, depth, mut gpu) = match twin {
         Twin::Cpu => {
+            let depth = depth_metres(frame, intr)?;
+            times.upload = lap();
             let images = cpu::image_stages(&depth, intr, cfg, &mut times, &mut lap);
             let seg = Segmentation::components(&images.boundary, MIN_REGION_PIXELS);
-            let cloud = Cloud::new(&depth, intr);
-            times.regions = lap();
-            (Some(images), seg, cloud, None)
+            (Some(images), seg, depth, None)
         }
         Twin::Gpu(gpu) => {
-            let out = gpu.image_stages(&depth, intr, cfg, keep_images)?;
-            // Since the depth: the upload, the submit and the readback.
+            // Checked before anything is uploaded; the GPU converts the raw frame to metres,
+            // and the CPU its own copy while the GPU works.
+            check_frame(frame, intr)?;
+            let (out, depth) =
+                gpu.image_stages(gpu::DepthUpload::Raw(frame), intr, cfg, keep_images, || depth_metres(frame, intr))?;
+            let depth = depth?;
+            // The upload, the submit, the readback and the numbering.
             let ms = lap();
-            let seg = Segmentation::from_roots(&out.regions, MIN_REGION_PIXELS);
             let t = out.times;
             [times.diffusion, times.normals, times.edges] = [t.diffusion, t.normals, t.edges];
-            times.regions = t.regions + lap();
-            times.upload += t.upload;
+            times.upload = t.upload + t.metres;
+            times.regions = t.regions + t.numbering;
             times.gpu_busy = t.busy;
-            times.readback = (ms - t.upload - t.diffusion - t.normals - t.edges - t.regions).max(0.0);
-            (out.images, seg, Cloud::new(&depth, intr), Some(gpu))
+            times.readback = (ms - times.upload - t.diffusion - t.normals - t.edges - times.regions).max(0.0);
+            (out.images, out.regions, depth, Some(gpu))
         }
     };
+    let cloud = Cloud::new(&depth, intr);
+    times.regions += lap();
     let (hyp, dist) = (cfg.ransac_hypotheses, cfg.ransac_inlier_distance_m as f32);
     let fit = |batch: &PointBatch| match gpu.as_deref_mut() {
         None => Ok(cpu::ransac::fit_planes(batch, hyp, dist)),

@@ -91,7 +91,9 @@ impl Segmentation {
     /// order), 0 outside any. The components are numbered in scan order, as
     /// `dense_from_roots` numbers them, but run by run (the runs found in bands of rows in
     /// parallel): a per-pixel renumbering pass was most of the GPU twin's regions stage.
-    pub fn from_roots(roots: &Grid<u32>, min_pixels: usize) -> Segmentation {
+    /// `roots` is a `width`-wide image borrowed where it lies: the GPU twin numbers them in
+    /// its mapped readback buffer, which a copy out took 0.17 ms of an H200's 640x480 frame.
+    pub fn from_roots(roots: &[u32], width: usize, min_pixels: usize) -> Segmentation {
         thread_local! {
             /// Each root's number, written at the root's own run (the first of its
             /// component in the scan) and cleared after: kept between frames.
@@ -99,9 +101,9 @@ impl Segmentation {
         }
         let mut count = 0u32;
         // Each run's root becomes its component's number, in place.
-        let mut runs = par_label_runs(roots);
+        let mut runs = par_label_runs(roots, width);
         NUMBER_OF_ROOT.with_borrow_mut(|number| {
-            number.resize(number.len().max(roots.data.len()), 0);
+            number.resize(number.len().max(roots.len()), 0);
             for (range, root) in &mut runs {
                 let r = *root as usize - 1;
                 if r == range.start {
@@ -115,7 +117,8 @@ impl Segmentation {
                 number[range.start] = 0;
             }
         });
-        Segmentation::from_runs(roots.width, roots.height, runs, count as usize, min_pixels)
+        let height = roots.len().checked_div(width).unwrap_or(0);
+        Segmentation::from_runs(width, height, runs, count as usize, min_pixels)
     }
 
     /// Regions from the runs of components 1..=count (pixel index ranges in scan order,
@@ -305,7 +308,7 @@ impl Segmentation {
             push_pixels(&self.labels.data, &mut self.pixels);
             return;
         }
-        write_runs(&par_label_runs(&self.labels), &mut self.pixels, None);
+        write_runs(&par_label_runs(&self.labels.data, self.labels.width), &mut self.pixels, None);
     }
 }
 
@@ -634,11 +637,11 @@ fn push_pixels(labels: &[u32], pixels: &mut [Vec<u32>]) {
     }
 }
 
-/// `label_runs` of an image, found in bands of rows in parallel (a run across a band's
-/// edge comes as two, each band's runs in order).
-fn par_label_runs(labels: &Grid<u32>) -> Vec<(Range<usize>, u32)> {
-    let band = RUN_BAND_ROWS * labels.width.max(1);
-    (labels.data.par_chunks(band).enumerate())
+/// `label_runs` of a `width`-wide image, found in bands of rows in parallel (a run across
+/// a band's edge comes as two, each band's runs in order).
+fn par_label_runs(labels: &[u32], width: usize) -> Vec<(Range<usize>, u32)> {
+    let band = RUN_BAND_ROWS * width.max(1);
+    (labels.par_chunks(band).enumerate())
         .flat_map_iter(|(b, labels)| label_runs(labels).map(move |(r, l)| (b * band + r.start..b * band + r.end, l)))
         .collect()
 }
@@ -1104,7 +1107,7 @@ mod tests {
                 let want =
                     Segmentation::from_labels(Grid { width: w, height: h, data: dense.clone() }, count, min_pixels);
                 for pass in 0..2 {
-                    let got = Segmentation::from_roots(&roots, min_pixels);
+                    let got = Segmentation::from_roots(&roots.data, roots.width, min_pixels);
                     assert_eq!(got.labels, want.labels, "seed {seed}, min {min_pixels}, pass {pass}: labels");
                     assert_eq!(got.pixels, want.pixels, "seed {seed}, min {min_pixels}, pass {pass}: pixels");
                 }
