@@ -146,6 +146,21 @@ fn an_image_wider_than_the_diffusion_solves_is_refused_not_cut() {
 }
 
 #[test]
+fn a_frame_whose_pixels_do_not_fill_it_is_refused_not_read_past() {
+    let Some(gpu) = gpu() else { return };
+    let mut gpu = gpu.lock().unwrap_or_else(|e| e.into_inner());
+    let (cfg, intr) = (PipelineConfig::default(), Intrinsics::L515_320X240);
+    for len in [320 * 240 - 1, 320 * 240 + 2] {
+        let frame = DepthFrame { stamp_ns: 0, width: 320, height: 240, depth_scale: 0.00025, pixels: vec![4000; len] };
+        let err = gpu.image_stages(DepthUpload::Raw(&frame), &intr, &cfg, false, || ()).err().expect("refused");
+        assert_eq!(err.to_string(), format!("a 320x240 image of {len} pixels"));
+        assert!(gpu.metres_alone(&frame).is_err(), "{len} pixels converted");
+    }
+    let short = Grid { width: 320, height: 240, data: vec![1.0f32; 100] };
+    assert!(gpu.image_stages(DepthUpload::Metres(&short), &intr, &cfg, false, || ()).is_err());
+}
+
+#[test]
 fn the_raw_depth_s_metres_are_the_cpu_twin_s_bit_for_bit() {
     // The conversion alone, from the same raw frame: one product a pixel on both twins.
     let Some(gpu) = gpu() else { return };

@@ -36,6 +36,8 @@ pub enum GpuError {
         "a {width}x{height} image is larger than the GPU's diffusion solves: lines of at most {DIFFUSION_MAX_LINE} pixels"
     )]
     TooLarge { width: u32, height: u32 },
+    #[error("a {width}x{height} image of {len} pixels")]
+    SizeMismatch { width: u32, height: u32, len: usize },
 }
 
 /// The longest row or column shaders/diffusion.wgsl solves (its MAX_LINE): a workgroup
@@ -244,6 +246,21 @@ pub enum DepthUpload<'a> {
     Metres(&'a Grid<f32>),
 }
 
+impl DepthUpload<'_> {
+    /// Width and height, once the pixels are checked to be as many: a short image would
+    /// leave the last frame's pixels in the buffer, a long one overrun it.
+    fn size(&self) -> Result<(u32, u32), GpuError> {
+        let (width, height, len) = match self {
+            DepthUpload::Raw(frame) => (frame.width, frame.height, frame.pixels.len()),
+            DepthUpload::Metres(depth) => (depth.width as u32, depth.height as u32, depth.data.len()),
+        };
+        if len as u64 != width as u64 * height as u64 {
+            return Err(GpuError::SizeMismatch { width, height, len });
+        }
+        Ok((width, height))
+    }
+}
+
 /// The image stages' outputs, read back.
 pub struct ImageStages {
     /// The 8-connected components of non-boundary pixels, numbered on the CPU from the
@@ -257,12 +274,13 @@ pub struct ImageStages {
 
 /// Milliseconds of one frame on the GPU. The stages are read from GPU timestamps where
 /// the adapter has them, else they are 0 (`extract_with` counts the rest of the wall
-/// time as the readback).
+/// time as the readback); `upload` and `numbering` are the CPU's wall-clock time.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct GpuTimes {
     /// Writing the depth into the GPU's buffer (and the uniforms).
     pub upload: f64,
-    /// The raw depth converted to metres on the GPU (0 for metres uploaded).
+    /// The raw depth converted to metres on the GPU (about 0, an empty pass, for metres
+    /// uploaded).
     pub metres: f64,
     pub diffusion: f64,
     pub normals: f64,
@@ -547,7 +565,8 @@ impl Gpu {
         self.queue.write_buffer(&f.metres_params, 0, bytemuck::bytes_of(&params));
     }
 
-    /// Maps `staging` (filled by the submit just done), hands its first `bytes` to `read`, unmaps.
+    /// Maps `staging` (filled by the submit just done), hands its first `bytes` to `read`,
+    /// unmaps. This is where the CPU waits for the GPU: `submit` does not.
     fn map<T>(&self, staging: &wgpu::Buffer, bytes: u64, read: impl FnOnce(&[u8]) -> T) -> Result<T, GpuError> {
         let slice = staging.slice(..bytes.max(4));
         let (tx, rx) = std::sync::mpsc::channel();
@@ -791,10 +810,7 @@ impl Gpu {
         images: bool,
         beside: impl FnOnce() -> B,
     ) -> Result<(ImageStages, B), GpuError> {
-        let (w, h) = match depth {
-            DepthUpload::Raw(frame) => (frame.width, frame.height),
-            DepthUpload::Metres(depth) => (depth.width as u32, depth.height as u32),
-        };
+        let (w, h) = depth.size()?;
         if w.max(h) > DIFFUSION_MAX_LINE {
             return Err(GpuError::TooLarge { width: w, height: h });
         }
@@ -894,7 +910,7 @@ impl Gpu {
 
     /// The raw depth's conversion to metres alone on the GPU: the stage's GPU-vs-CPU test.
     pub fn metres_alone(&mut self, frame: &DepthFrame) -> Result<Grid<f32>, GpuError> {
-        let (w, h) = (frame.width, frame.height);
+        let (w, h) = DepthUpload::Raw(frame).size()?;
         self.frame_for(w, h);
         self.upload_raw(frame);
         let f = self.frame.as_ref().expect("made above");

@@ -53,11 +53,14 @@ pub struct StageTimes {
     /// Gradient, classes, hysteresis and the closed boundary.
     pub edges: f64,
     /// Connected components of the pixels inside the boundary, numbered (on the GPU
-    /// twin: the components' GPU time and the CPU's numbering of the roots read back).
+    /// twin: the components' GPU time and the CPU's numbering of the roots read back),
+    /// and the rays of the frame's points (`Cloud`) on either twin.
     pub regions: f64,
     /// GPU only: from the upload to the numbered regions on the CPU, less the stages' GPU
-    /// time and the numbering: the submit, waiting and mapping (all of it where the adapter
-    /// has no timestamps, the stages then reading 0).
+    /// time and the numbering: the submit, waiting and mapping, the gaps between the
+    /// passes, the images' copies when kept, and the CPU's own conversion to metres where
+    /// it outlasts the GPU's work (all of it where the adapter has no timestamps, the
+    /// stages then reading 0).
     pub readback: f64,
     /// Region clean-up (splits, joins, growth) and outlines.
     pub contours: f64,

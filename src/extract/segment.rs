@@ -117,6 +117,12 @@ impl Segmentation {
                 number[range.start] = 0;
             }
         });
+        // Whole rows: the lists are written up to width x height, and a run past that would
+        // not fit them.
+        assert!(
+            if width == 0 { roots.is_empty() } else { roots.len().is_multiple_of(width) },
+            "roots of whole {width}-pixel rows"
+        );
         let height = roots.len().checked_div(width).unwrap_or(0);
         Segmentation::from_runs(width, height, runs, count as usize, min_pixels)
     }
