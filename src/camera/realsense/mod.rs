@@ -90,6 +90,8 @@ fn start_device<const N: usize>(
     streams: [&[StreamRequest]; N],
 ) -> Result<[Frames; N], CameraError> {
     sys::check_loaded_library(what == L515)?;
+    // Held until the context is dropped at the end, after the pipelines have started.
+    let _one = sys::one_context_at_a_time();
     let context = Context::new().map_err(|e| CameraError::Driver(format!("librealsense context: {e}")))?;
     let devices = context.query_devices(HashSet::new());
     let found: Vec<DeviceEntry> = devices.iter().map(entry).collect();
@@ -107,7 +109,8 @@ fn start_device<const N: usize>(
             config.enable_stream(s.kind, s.index, s.width, s.height, s.format, s.fps).map_err(driver(what))?;
         }
         let pipeline = InactivePipeline::try_from(&context).map_err(|e| CameraError::Driver(format!("{what}: {e}")))?;
-        pipeline.start(Some(config)).map(Frames::Camera).map_err(driver(what))
+        let started = pipeline.start(Some(config)).map_err(driver(what))?;
+        Ok(Frames::Camera(LivePipeline(std::mem::ManuallyDrop::new(started))))
     };
     let mut started = Vec::with_capacity(N);
     for s in streams {
@@ -122,9 +125,21 @@ const L515: &str = "L515";
 /// Where a camera's frame sets come from.
 enum Frames {
     /// A camera, through realsense-rust's pipeline.
-    Camera(ActivePipeline),
+    Camera(LivePipeline),
     /// A recording, through the C API ([`Playback`]).
     Recording(Playback),
+}
+
+/// A camera's running pipeline, stopped and deleted (with its device and, its last user,
+/// the context) under the context lock (`sys::one_context_at_a_time`).
+struct LivePipeline(std::mem::ManuallyDrop<ActivePipeline>);
+
+impl Drop for LivePipeline {
+    fn drop(&mut self) {
+        let _one = sys::one_context_at_a_time();
+        // SAFETY: dropped once, here, and never used after.
+        unsafe { std::mem::ManuallyDrop::drop(&mut self.0) }
+    }
 }
 
 impl Frames {
@@ -135,7 +150,7 @@ impl Frames {
 
     fn profile(&self) -> &PipelineProfile {
         match self {
-            Frames::Camera(p) => p.profile(),
+            Frames::Camera(p) => p.0.profile(),
             Frames::Recording(p) => p.profile(),
         }
     }
@@ -144,7 +159,7 @@ impl Frames {
     /// recording has nothing more.
     fn wait(&mut self, timeout: Duration) -> Result<CompositeFrame, CameraError> {
         match self {
-            Frames::Camera(p) => p.wait(Some(timeout)).map_err(|_| CameraError::Timeout(timeout)),
+            Frames::Camera(p) => p.0.wait(Some(timeout)).map_err(|_| CameraError::Timeout(timeout)),
             Frames::Recording(p) => p.wait(timeout)?.ok_or(CameraError::Ended),
         }
     }
@@ -152,7 +167,7 @@ impl Frames {
     /// A frame set if one is waiting.
     fn poll(&mut self) -> Result<Option<CompositeFrame>, CameraError> {
         match self {
-            Frames::Camera(p) => match p.poll() {
+            Frames::Camera(p) => match p.0.poll() {
                 Ok(std::task::Poll::Ready(f)) => Ok(Some(f)),
                 Ok(std::task::Poll::Pending) => Ok(None),
                 Err(e) => Err(CameraError::Driver(e.to_string())),

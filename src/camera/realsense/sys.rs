@@ -46,6 +46,38 @@ pub fn check_loaded_library(opens_l515: bool) -> Result<(), CameraError> {
     crate::camera::check_library(library_version()?, header_version(), opens_l515)
 }
 
+/// Held while librealsense makes, starts, queries or deletes a context and what it opened (a
+/// camera's or a recording's), so that this process does so one thread at a time. Two
+/// contexts made at once on two threads (the L515's and the D435i's, opened side by side at
+/// start-up) race in librealsense's USB layer (libusb's initialisation and device list,
+/// librealsense issues 12280 and 12400); the RealSense tests, whose live-camera and playback
+/// tests overlap, once died of a corrupted heap in about a dozen CI runs. Reentrant on one
+/// thread: a start that fails half way deletes what it made with the lock still held.
+pub(super) struct ContextLock(Option<std::sync::MutexGuard<'static, ()>>);
+
+thread_local! {
+    /// Whether this thread holds the context lock.
+    static HOLDS_CONTEXT_LOCK: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+pub(super) fn one_context_at_a_time() -> ContextLock {
+    static CONTEXTS: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    if HOLDS_CONTEXT_LOCK.get() {
+        return ContextLock(None);
+    }
+    let guard = CONTEXTS.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    HOLDS_CONTEXT_LOCK.set(true);
+    ContextLock(Some(guard))
+}
+
+impl Drop for ContextLock {
+    fn drop(&mut self) {
+        if self.0.is_some() {
+            HOLDS_CONTEXT_LOCK.set(false);
+        }
+    }
+}
+
 /// One stream a pipeline should deliver; zero sizes and rates take what there is.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct StreamRequest {
@@ -71,8 +103,10 @@ impl StreamRequest {
 /// neither the playback device nor the pipeline's handle, hence the C API.) A context of its
 /// own each, since librealsense loads a file into a context only once.
 pub(super) struct Playback {
-    handles: Handles,
+    // Dropped first: the pipeline holds the device too, so the device and the context are
+    // deleted with the handles, under the context lock.
     profile: PipelineProfile,
+    handles: Handles,
 }
 
 /// The context and pipeline, stopped and deleted on drop.
@@ -83,6 +117,7 @@ struct Handles {
 
 impl Drop for Handles {
     fn drop(&mut self) {
+        let _one = one_context_at_a_time();
         // SAFETY: handles this struct owns; stopping a pipeline that never started only
         // reports an error, which is ignored.
         unsafe {
@@ -112,6 +147,7 @@ impl Playback {
         let file = CString::new(path.as_os_str().as_encoded_bytes())
             .map_err(|_| CameraError::Driver(format!("{what}: a path with a NUL byte")))?;
         let mut err = std::ptr::null_mut();
+        let _one = one_context_at_a_time();
         // SAFETY: every handle is checked before use and owned by `handles` (deleted with it
         // on any failure); the config is deleted once the pipeline has started with it.
         unsafe {
@@ -184,5 +220,42 @@ impl Playback {
 
     fn pipeline(&self) -> *mut sys::rs2_pipeline {
         self.handles.pipeline.expect("a started playback has its pipeline").as_ptr()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::mpsc;
+
+    use super::*;
+    use crate::sequence::Sequence;
+
+    #[test]
+    fn a_recording_is_opened_only_when_no_other_thread_works_a_context() {
+        let dir = tempfile::tempdir().unwrap();
+        let bag = dir.path().join("depth.bag");
+        let seq = Sequence::open(concat!(env!("CARGO_MANIFEST_DIR"), "/mock_frames/straight_320")).unwrap();
+        super::super::bag::write_l515_bag(&seq, &bag, 3).unwrap();
+        let held = one_context_at_a_time();
+        // Reentrant on its own thread: a failing start deletes its handles under the lock.
+        drop(one_context_at_a_time());
+        let (tx, rx) = mpsc::channel();
+        let opener = std::thread::spawn(move || {
+            let playback = Playback::start(&bag, &[StreamRequest::any(Rs2StreamKind::Depth, None)]);
+            // Said before the playback is dropped, which takes the lock again.
+            tx.send(playback.as_ref().map(|_| ()).map_err(|e| e.to_string())).unwrap();
+            drop(playback);
+        });
+        assert!(
+            rx.recv_timeout(Duration::from_millis(500)).is_err(),
+            "the recording opened while this thread held the context lock"
+        );
+        drop(held);
+        let opened = rx.recv_timeout(Duration::from_secs(60)).expect("opened once the lock was free");
+        assert_eq!(opened, Ok(()));
+        opener.join().unwrap();
+        // And the lock is free again once the other thread's playback is dropped.
+        assert!(!HOLDS_CONTEXT_LOCK.get());
+        drop(one_context_at_a_time());
     }
 }
