@@ -394,7 +394,9 @@ fn a_region_leaking_across_two_planes_is_split_and_both_are_fitted() {
     assert_eq!(seg.pixels.len(), 1);
     let mut fits = ransac::fit_planes(&seg.points(&[0], &Cloud::new(&depth, &i)), 20, 0.01);
     assert!(fits[0].unwrap().inlier_ratio() < 0.9, "one plane cannot fit both surfaces");
-    let pieces = seg.split_leaks(&mut fits, &Cloud::new(&depth, &i), 0.01, 0.9, 30);
+    let leaks = seg.split_leaks(&mut fits, &Cloud::new(&depth, &i), 0.01, 0.9, 30);
+    assert_eq!(leaks.split, vec![0], "the region that leaked is cut back");
+    let pieces = leaks.pieces;
     assert_eq!(
         pieces,
         vec![1],
@@ -412,6 +414,45 @@ fn a_region_leaking_across_two_planes_is_split_and_both_are_fitted() {
     let new = fits[1].unwrap();
     assert!(new.normal.angle(&Vector3::new(0.0, -0.8, -0.6)) < 1e-3 && (new.offset - 0.8).abs() < 1e-3);
     assert_eq!(seg.pixels[0].len() + seg.pixels[1].len(), 160 * 120);
+}
+
+/// The joins' scan runs beside the first fits, on the labels as the edges left them. A
+/// leak split changes them: the pairs are then found again, and the piece cut off joins
+/// the region of its own plane beyond a gap that pre-split pairs never saw it meet.
+#[test]
+fn a_piece_split_off_a_leak_joins_its_own_plane_across_a_gap() {
+    use polymap::extract::cpu::ransac::PointBatch;
+    use polymap::extract::{MIN_REGION_PIXELS, StageTimes, segment::Segmentation, segment_and_fit};
+    let (w, h) = (160usize, 120usize);
+    let i = intr(w as u32, h as u32);
+    let floor = plane_depth(&i, Vector3::new(0.0, -0.8, -0.6), 1.0);
+    // A step 20 cm up (parallel to the floor) from column 100 on, cut by a boundary band
+    // in columns 120..126 whose middle four are dropouts: the step's near part leaks into
+    // the floor's region, its far part is a region of its own.
+    let step = plane_depth(&i, Vector3::new(0.0, -0.8, -0.6), 0.8);
+    let depth = Grid {
+        data: (0..w * h)
+            .map(|k| match k % w {
+                0..100 => floor.data[k],
+                121..125 => 0.0,
+                _ => step.data[k],
+            })
+            .collect(),
+        ..floor
+    };
+    let boundary =
+        Grid { width: w, height: h, data: (0..w * h).map(|k| u8::from((120..126).contains(&(k % w)))).collect() };
+    let seg = Segmentation::components(&boundary, MIN_REGION_PIXELS);
+    assert_eq!(seg.pixels.len(), 2, "the floor with the step's near part, and the step's far part");
+    let (cloud, cfg) = (Cloud::new(&depth, &i), PipelineConfig::default());
+    let fit =
+        |batch: &PointBatch| Ok(ransac::fit_planes(batch, cfg.ransac_hypotheses, cfg.ransac_inlier_distance_m as f32));
+    let (seg, _, fits, _) = segment_and_fit(seg, &cloud, &cfg, fit, &mut StageTimes::default(), &mut || 0.0).unwrap();
+    let label = |u: usize| seg.labels.data[60 * w + u];
+    assert_ne!(label(50), label(110), "the leak split: the floor keeps its own pixels");
+    assert_eq!(label(110), label(140), "the step's two parts joined across the dropouts");
+    let joined = fits[label(110) as usize - 1].expect("the joined step has a plane");
+    assert!((joined.offset - 0.8).abs() < 1e-3, "on the step's plane: {joined:?}");
 }
 
 #[test]
@@ -723,7 +764,7 @@ fn pieces_of_one_plane_cut_apart_across_the_rows_are_bridged_down_the_columns() 
     assert_eq!(seg.pixels.len(), 2);
     let cloud = Cloud::new(&depth, &i);
     let mut fits = ransac::fit_planes(&seg.points(&[0, 1], &cloud), 64, 0.01);
-    assert_eq!(seg.join_coplanar(&mut fits, &cloud, 0.03, 0.01, 0.9), 1);
+    assert_eq!(seg.join_coplanar(seg.join_candidates(&cloud, 0.03), &mut fits, &cloud, 0.01, 0.9), 1);
     let inside: Vec<bool> = seg.labels.data.iter().map(|&l| l == 1).collect();
     assert_eq!(label_components(&inside, w, h).1, 1, "one connected region");
     assert_eq!(seg.pixels[0].len(), w * h, "both pieces and the bridged rows");
@@ -755,7 +796,8 @@ fn join_strip(
     let batch = seg.points(&all, &Cloud::new(&depth, &i));
     let mut fits = ransac::fit_planes(&batch, 64, 0.01);
     assert!(fits.iter().all(|f| f.is_some_and(|f| f.inlier_ratio() > 0.95)), "each piece is a plane");
-    let joins = seg.join_coplanar(&mut fits, &Cloud::new(&depth, &i), 0.03, 0.01, 0.9);
+    let cloud = Cloud::new(&depth, &i);
+    let joins = seg.join_coplanar(seg.join_candidates(&cloud, 0.03), &mut fits, &cloud, 0.01, 0.9);
     (joins, seg, fits)
 }
 

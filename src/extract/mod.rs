@@ -378,27 +378,38 @@ pub fn segment_and_fit(
     mut seg: Segmentation,
     cloud: &Cloud,
     cfg: &PipelineConfig,
-    mut fit: impl FnMut(&PointBatch) -> Result<Vec<Option<PlaneFit>>, ExtractError>,
+    mut fit: impl FnMut(&PointBatch) -> Result<Vec<Option<PlaneFit>>, ExtractError> + Send,
     times: &mut StageTimes,
-    lap: &mut impl FnMut() -> f64,
+    lap: &mut (impl FnMut() -> f64 + Send),
 ) -> Result<Segmented, ExtractError> {
-    let dist = cfg.ransac_inlier_distance_m as f32;
+    let (dist, ratio) = (cfg.ransac_inlier_distance_m as f32, cfg.depth_edge_ratio as f32);
     let min_ratio = cfg.ransac_min_inlier_ratio;
-    let all: Vec<usize> = (0..seg.pixels.len()).collect();
-    let batch = seg.sampled_points(&all, cloud, MAX_FIT_POINTS);
-    times.contours = lap();
-    let mut fits = fit(&batch)?;
-    times.ransac = lap();
-    let pieces = seg.split_leaks(&mut fits, cloud, dist, min_ratio, MIN_REGION_PIXELS);
-    let batch = seg.sampled_points(&pieces, cloud, MAX_FIT_POINTS);
+    // The joins' scan reads only the labels: it runs beside the fits' sample and the first
+    // fits (on another thread, or while the GPU scores), which are serial in part, and
+    // again only where a leak split has changed the labels (no mock frame has one).
+    let (candidates, first_fits) = rayon::join(
+        || seg.join_candidates(cloud, ratio),
+        || {
+            let all: Vec<usize> = (0..seg.pixels.len()).collect();
+            let batch = seg.sampled_points(&all, cloud, MAX_FIT_POINTS);
+            times.contours = lap();
+            let fits = fit(&batch);
+            times.ransac = lap();
+            fits
+        },
+    );
+    let mut fits = first_fits?;
+    let leaks = seg.split_leaks(&mut fits, cloud, dist, min_ratio, MIN_REGION_PIXELS);
+    let batch = seg.sampled_points(&leaks.pieces, cloud, MAX_FIT_POINTS);
     times.contours += lap();
-    if !pieces.is_empty() {
-        for (r, f) in pieces.iter().zip(fit(&batch)?) {
+    if !leaks.pieces.is_empty() {
+        for (r, f) in leaks.pieces.iter().zip(fit(&batch)?) {
             fits[*r] = f;
         }
     }
     times.ransac += lap();
-    seg.join_coplanar(&mut fits, cloud, cfg.depth_edge_ratio as f32, dist, min_ratio);
+    let candidates = if leaks.split.is_empty() { candidates } else { seg.join_candidates(cloud, ratio) };
+    seg.join_coplanar(candidates, &mut fits, cloud, dist, min_ratio);
     let accepted: Vec<bool> = fits.iter().map(|f| f.is_some_and(|f| f.inlier_ratio() >= min_ratio)).collect();
     seg.grow(&fits, &accepted, cloud, dist, cfg.region_grow_px);
     // Three jobs that only read the grown regions, side by side: each is a few tenths of a
@@ -407,7 +418,7 @@ pub fn segment_and_fit(
         || {
             rayon::join(
                 || refit_grown(&seg, &mut fits, &accepted, cloud, dist, min_ratio),
-                || seg.creases(cloud, cfg.depth_edge_ratio as f32),
+                || seg.creases(cloud, ratio),
             )
         },
         // Outlines only for the planes that can become polygons: the refit keeps each

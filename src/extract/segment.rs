@@ -220,7 +220,7 @@ impl Segmentation {
 
     /// Splits every region whose fit has an inlier ratio under `min_ratio`: it keeps the
     /// largest 8-connected patch of its plane's inliers, refitted; the other connected
-    /// pieces of at least `min_pixels` become new regions (returned, their fits None).
+    /// pieces of at least `min_pixels` become new regions (their fits None).
     pub fn split_leaks(
         &mut self,
         fits: &mut Vec<Option<PlaneFit>>,
@@ -228,9 +228,9 @@ impl Segmentation {
         dist: f32,
         min_ratio: f64,
         min_pixels: usize,
-    ) -> Vec<usize> {
+    ) -> Leaks {
         let (w, h) = (self.labels.width, self.labels.height);
-        let mut new_regions = Vec::new();
+        let mut leaks = Leaks::default();
         // Pixels flooded so far; a flood stays inside one region's pixels, which are
         // unmarked again after each use (a whole image cleared per region cost more).
         let mut seen = vec![false; w * h];
@@ -239,6 +239,7 @@ impl Segmentation {
             if fit.inlier_ratio() >= min_ratio {
                 continue;
             }
+            leaks.split.push(r);
             let label = r as u32 + 1;
             let inlier = |i: usize| {
                 self.labels.data[i] == label && cloud.point(i).is_some_and(|p| fit.distance(&p) < dist as f64)
@@ -270,7 +271,7 @@ impl Segmentation {
                 if self.labels.data[i] == RELEASED && !seen[i] {
                     let piece = flood(i, w, h, &mut seen, |j| self.labels.data[j] == RELEASED);
                     if piece.len() >= min_pixels {
-                        new_regions.push(self.push(piece));
+                        leaks.pieces.push(self.push(piece));
                         fits.push(None);
                     }
                 }
@@ -282,7 +283,7 @@ impl Segmentation {
                 }
             }
         }
-        new_regions
+        leaks
     }
 
     /// Grows every region with an accepted fit (`accepted[r]`) into unlabelled pixels,
@@ -752,6 +753,23 @@ const MIN_CREASE_STEPS: u32 = 3;
 /// the band growth left between them (mixed pixels, a dropout).
 const MAX_CREASE_GAP_PX: usize = 4;
 
+/// What `split_leaks` did: the regions it cut back to their plane's largest patch, and
+/// the new regions made of the rest (ascending).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Leaks {
+    pub split: Vec<usize>,
+    pub pieces: Vec<usize>,
+}
+
+/// The pairs of regions `join_coplanar` considers: those that meet across at most
+/// `JOIN_GAP_PX` unlabelled pixels with no depth step, with how many times a row or a
+/// column steps between them (labels a < b, sorted). Found on the labels alone
+/// (`Segmentation::join_candidates`), so before the fits and beside them; a leak split
+/// after that changes the labels, and they must be found again.
+pub struct JoinCandidates {
+    steps: Vec<((u32, u32), u32)>,
+}
+
 /// Which regions meet along a crease of the surface: where a row or a column steps from
 /// one region to the other (across at most `MAX_CREASE_GAP_PX` unlabelled pixels) with no
 /// depth step between the two pixels. Regions side by side across a depth step (a box's
@@ -774,6 +792,11 @@ impl Segmentation {
     /// parts two neighbouring pixels (as the boundary map's, per pixel of distance).
     pub fn creases(&self, cloud: &Cloud, ratio: f32) -> Creases {
         Creases { steps: self.steps_between(cloud, ratio, MAX_CREASE_GAP_PX) }
+    }
+
+    /// The pairs of regions that may join (`JoinCandidates`); `ratio` as for `creases`.
+    pub fn join_candidates(&self, cloud: &Cloud, ratio: f32) -> JoinCandidates {
+        JoinCandidates { steps: self.steps_between(cloud, ratio, JOIN_GAP_PX) }
     }
 
     /// For each pair of regions (labels a < b, sorted), how many times a row or a column
@@ -850,15 +873,16 @@ impl Segmentation {
     /// across a thin strip (a tread cut by the image's bottom edge leaves a strip a few
     /// pixels tall, and every dropout's spoiled square of normals cuts it through), into
     /// pieces each too small to keep. Two regions join when they touch across at most
-    /// `JOIN_GAP_PX` with no depth step, their planes are within `JOIN_ANGLE_COS`, and
-    /// their union is still one plane: refitted, at least `min_ratio` of each one's points
-    /// within `dist` of it. The region joined into keeps the lower index; the other is left
-    /// empty, its fit None. Returns how many joins were made.
+    /// `JOIN_GAP_PX` with no depth step (`candidates`, found on the labels as they are
+    /// now), their planes are within `JOIN_ANGLE_COS`, and their union is still one plane:
+    /// refitted, at least `min_ratio` of each one's points within `dist` of it. The region
+    /// joined into keeps the lower index; the other is left empty, its fit None. Returns
+    /// how many joins were made.
     pub fn join_coplanar(
         &mut self,
+        candidates: JoinCandidates,
         fits: &mut [Option<PlaneFit>],
         cloud: &Cloud,
-        ratio: f32,
         dist: f32,
         min_ratio: f64,
     ) -> usize {
@@ -872,7 +896,7 @@ impl Segmentation {
             }
             r
         };
-        for ((a, b), n) in self.steps_between(cloud, ratio, JOIN_GAP_PX) {
+        for ((a, b), n) in candidates.steps {
             // A pair met before one of its regions was joined away is a pair of what they
             // are now part of: a strip cut into pieces A B C joins A+B, then (A+B)+C.
             let (a, b) = (find(&now_in, a as usize - 1), find(&now_in, b as usize - 1));
