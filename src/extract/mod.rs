@@ -384,9 +384,10 @@ pub fn segment_and_fit(
 ) -> Result<Segmented, ExtractError> {
     let (dist, ratio) = (cfg.ransac_inlier_distance_m as f32, cfg.depth_edge_ratio as f32);
     let min_ratio = cfg.ransac_min_inlier_ratio;
-    // The joins' scan reads only the labels: it runs beside the fits' sample and the first
-    // fits (on another thread, or while the GPU scores), which are serial in part, and
-    // again only where a leak split has changed the labels (no mock frame has one).
+    // The joins' scan reads the labels and the depth, and writes nothing the fits read: it
+    // runs beside the fits' sample and the first fits (on another thread; one after the
+    // other on one), which are serial in part. It runs again only in a frame where a leak
+    // split has changed the labels (no mock frame has one).
     let (candidates, first_fits) = rayon::join(
         || seg.join_candidates(cloud, ratio),
         || {

@@ -753,8 +753,9 @@ const MIN_CREASE_STEPS: u32 = 3;
 /// the band growth left between them (mixed pixels, a dropout).
 const MAX_CREASE_GAP_PX: usize = 4;
 
-/// What `split_leaks` did: the regions it cut back to their plane's largest patch, and
-/// the new regions made of the rest (ascending).
+/// What `split_leaks` did: the regions it cut back to their plane's largest patch (their
+/// labels changed), and the new regions made of the pieces of the rest that are large
+/// enough (ascending).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Leaks {
     pub split: Vec<usize>,
@@ -763,9 +764,9 @@ pub struct Leaks {
 
 /// The pairs of regions `join_coplanar` considers: those that meet across at most
 /// `JOIN_GAP_PX` unlabelled pixels with no depth step, with how many times a row or a
-/// column steps between them (labels a < b, sorted). Found on the labels alone
-/// (`Segmentation::join_candidates`), so before the fits and beside them; a leak split
-/// after that changes the labels, and they must be found again.
+/// column steps between them (labels a < b, sorted). Found on the labels and the depth
+/// alone (`Segmentation::join_candidates`), so before the fits and beside them; a leak
+/// split after that changes the labels (`Leaks::split`), and they must be found again.
 pub struct JoinCandidates {
     steps: Vec<((u32, u32), u32)>,
 }
