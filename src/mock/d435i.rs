@@ -97,6 +97,17 @@ impl Trajectory {
         let accel = now.rotation.inverse() * (accel_world + Vector3::new(0.0, 0.0, GRAVITY));
         ImuSample { stamp_ns: t_ns, gyro: gyro.into(), accel: accel.into() }
     }
+
+    /// The IMU at wall time `t_ns` of a looped walk: backwards, the body turns the other
+    /// way (the gyro changes sign; the acceleration, a second derivative, does not).
+    pub fn imu_looped(&self, clock: &super::SequenceClock, t_ns: StampNs) -> ImuSample {
+        let mut imu = self.imu(clock.sequence_time(t_ns));
+        if clock.backwards(t_ns) {
+            imu.gyro = imu.gyro.map(|w| -w);
+        }
+        imu.stamp_ns = t_ns;
+        imu
+    }
 }
 
 /// The D435i's IR intrinsics at `width` x `height` (about 87 deg across, as the real one).
@@ -203,8 +214,7 @@ impl MockD435i {
             every(start, cfg.gyro_hz as f64, move |t| {
                 let (mock, clock, tx) = (mock.clone(), clock.clone(), tx.clone());
                 async move {
-                    let mut imu = mock.trajectory.imu(clock.sequence_time(t));
-                    imu.stamp_ns = t;
+                    let imu = mock.trajectory.imu_looped(&clock, t);
                     tx.send(D435iSample::Imu(imu)).await.is_ok()
                 }
             })
