@@ -369,6 +369,8 @@ impl Default for MapConfig {
 pub struct PosesConfig {
     /// A frame between two poses further apart than this gets no pose and is skipped, s.
     pub max_gap_s: f64,
+    /// How long an extracted frame waits for the pose after its stamp, from its stamp, s.
+    pub max_wait_s: f64,
     /// Poses further than this from the odometry's origin are refused, m.
     pub max_radius_m: f64,
     /// Poses stamped further than this ahead of this machine's clock are refused, s.
@@ -380,7 +382,7 @@ pub struct PosesConfig {
 
 impl Default for PosesConfig {
     fn default() -> Self {
-        PosesConfig { max_gap_s: 0.1, max_radius_m: 1e4, max_ahead_s: 0.5, restart_after_s: 1.0 }
+        PosesConfig { max_gap_s: 0.25, max_wait_s: 0.3, max_radius_m: 1e4, max_ahead_s: 0.5, restart_after_s: 1.0 }
     }
 }
 
@@ -428,6 +430,11 @@ pub struct Ros2Config {
     /// VINS's odometry topic.
     pub odometry: RosName,
     pub odometry_type: OdometryType,
+    /// VINS-Fusion's IMU-rate propagated odometry (nav_msgs/Odometry): the motion between
+    /// the optimised poses, and a pose for a frame before the next optimised one comes;
+    /// None: not used.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub imu_propagate: Option<RosName>,
     /// How polymap's topics are encoded: ROS 2 CDR, or JSON for looking at them with plain
     /// Zenoh tools.
     pub encoding: Encoding,
@@ -454,6 +461,7 @@ impl Default for Ros2Config {
             node: "polymap".into(),
             odometry: RosName::parse("/odometry").expect("a valid name"),
             odometry_type: OdometryType::Odometry,
+            imu_propagate: Some(RosName::parse("/imu_propagate").expect("a valid name")),
             encoding: Encoding::Cdr,
             map_frame: "map".into(),
             odometry_frame: "world".into(),
@@ -632,6 +640,7 @@ impl Config {
 
         let q = &self.poses;
         check_range("poses.max_gap_s", q.max_gap_s, 0.001, 10.0)?;
+        check_range("poses.max_wait_s", q.max_wait_s, 0.0, 10.0)?;
         check_range("poses.max_radius_m", q.max_radius_m, 1.0, crate::types::MAX_COORDINATE_M)?;
         check_range("poses.max_ahead_s", q.max_ahead_s, 0.0, 60.0)?;
         check_range("poses.restart_after_s", q.restart_after_s, 0.1, 3600.0)?;

@@ -6,6 +6,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use polymap::config::{Backend, Config};
+use polymap::mock::vins::MockVinsOptions;
 use polymap::sequence::Sequence;
 use polymap::synth::{self, SceneKind, SynthOptions};
 use polymap::viz;
@@ -163,17 +164,35 @@ enum Command {
         /// Where its top-down picture goes
         #[arg(long, default_value = "out/map.png")]
         render: PathBuf,
-        /// Mock VINS poses per second
-        #[arg(long, default_value_t = 100.0)]
+        /// Mock VINS poses per second (VINS-Fusion on a robot: 10-20)
+        #[arg(long, default_value_t = MockVinsOptions::ROBOT.rate_hz)]
         vins_rate: f64,
+        /// How late the mock VINS publishes each pose after its stamp, ms
+        #[arg(long, default_value_t = MockVinsOptions::ROBOT.latency_ms)]
+        vins_latency_ms: f64,
+        /// Jitter of the mock VINS's stamps and delays, ms
+        #[arg(long, default_value_t = MockVinsOptions::ROBOT.jitter_ms)]
+        vins_jitter_ms: f64,
+        /// The mock VINS's IMU-rate propagated poses per second (imu_propagate); 0: none
+        #[arg(long, default_value_t = MockVinsOptions::ROBOT.propagate_hz)]
+        vins_propagate_hz: f64,
     },
     /// Publish a sequence's poses as VINS-Fusion's ROS 2 port would: nav_msgs/Odometry on the
     /// config's odometry topic, the sequence looped on the wall clock
     MockVins {
         seq: PathBuf,
-        /// Poses per second
-        #[arg(long, default_value_t = 30.0)]
+        /// Poses per second (VINS-Fusion on a robot: 10-20)
+        #[arg(long, default_value_t = MockVinsOptions::ROBOT.rate_hz)]
         rate: f64,
+        /// How late each pose is published after its stamp, ms
+        #[arg(long, default_value_t = MockVinsOptions::ROBOT.latency_ms)]
+        latency_ms: f64,
+        /// Jitter of the stamps and of the delays, ms
+        #[arg(long, default_value_t = MockVinsOptions::ROBOT.jitter_ms)]
+        jitter_ms: f64,
+        /// IMU-rate propagated poses per second on the config's ros2.imu_propagate; 0: none
+        #[arg(long, default_value_t = MockVinsOptions::ROBOT.propagate_hz)]
+        propagate_hz: f64,
         /// Vertical drift added to the poses, mm per second
         #[arg(long, default_value_t = 0.0)]
         drift: f64,
@@ -346,12 +365,31 @@ fn run(cli: Cli) -> Result<()> {
             let runtime = tokio::runtime::Runtime::new()?;
             println!("{}", runtime.block_on(polymap::runtime::run(&config, duration))?);
         }
-        Command::Demo { duration, config, out, render, vins_rate } => {
+        Command::Demo {
+            duration,
+            config,
+            out,
+            render,
+            vins_rate,
+            vins_latency_ms,
+            vins_jitter_ms,
+            vins_propagate_hz,
+        } => {
             let mut config = load_config(config, None)?;
             let duration = seconds(duration)?;
             config.map.snapshot_path = out.clone();
             let runtime = tokio::runtime::Runtime::new()?;
-            let s = runtime.block_on(polymap::runtime::demo::demo(&config, duration, vins_rate))?;
+            let s = runtime.block_on(polymap::runtime::demo::demo(
+                &config,
+                duration,
+                MockVinsOptions {
+                    rate_hz: vins_rate,
+                    latency_ms: vins_latency_ms,
+                    jitter_ms: vins_jitter_ms,
+                    propagate_hz: vins_propagate_hz,
+                    ..MockVinsOptions::ROBOT
+                },
+            ))?;
             println!("{s} in {}", out.display());
             let map: polymap::map::MapSnapshot = serde_json::from_str(&std::fs::read_to_string(&out)?)?;
             let seq = Sequence::open(&config.sources.depth.sequence)?;
@@ -363,11 +401,14 @@ fn run(cli: Cli) -> Result<()> {
                 .with_context(|| format!("writing {}", render.display()))?;
             println!("picture in {}", render.display());
         }
-        Command::MockVins { seq, rate, drift, duration, config } => {
+        Command::MockVins { seq, rate, latency_ms, jitter_ms, propagate_hz, drift, duration, config } => {
             let config = load_config(config, None)?;
             let s = Sequence::open(&seq)?;
-            let opts = polymap::mock::vins::MockVinsOptions {
+            let opts = MockVinsOptions {
                 rate_hz: rate,
+                latency_ms,
+                jitter_ms,
+                propagate_hz,
                 drift_mm_per_s: drift,
                 duration: duration.map(seconds).transpose()?,
             };

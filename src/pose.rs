@@ -109,7 +109,10 @@ pub const MAX_TURN_RAD_S: f64 = 10.0;
 /// Running totals of what came in.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct PoseCounters {
+    /// Optimised poses kept.
     pub accepted: u64,
+    /// Propagated (IMU-rate) poses kept.
+    pub propagated: u64,
     /// Decoded but refused by the checks.
     pub rejected: u64,
     /// Messages that did not decode at all.
@@ -120,96 +123,52 @@ pub struct PoseCounters {
     pub restarts: u64,
 }
 
-pub struct PoseBuffer {
+/// One stream of poses, oldest first.
+struct Track {
     poses: VecDeque<Pose>,
     capacity: usize,
-    limits: PoseLimits,
     /// Local clock when the newest pose arrived.
     last_arrival_ns: Option<StampNs>,
-    pub counters: PoseCounters,
 }
 
-impl PoseBuffer {
-    /// Keeps the newest `capacity` poses; frames between poses further apart than
-    /// `max_gap_ns` get none. Checks no stamp against the local clock ([`PoseLimits::gap_only`]).
-    pub fn new(capacity: usize, max_gap_ns: u64) -> PoseBuffer {
-        PoseBuffer::with_limits(capacity, PoseLimits::gap_only(max_gap_ns))
-    }
-
-    pub fn with_limits(capacity: usize, limits: PoseLimits) -> PoseBuffer {
-        PoseBuffer {
+impl Track {
+    fn new(capacity: usize) -> Track {
+        Track {
             poses: VecDeque::with_capacity(capacity.clamp(2, 1 << 16)),
             capacity: capacity.max(2),
-            limits,
             last_arrival_ns: None,
-            counters: PoseCounters::default(),
         }
     }
 
-    pub fn len(&self) -> usize {
-        self.poses.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.poses.is_empty()
-    }
-
-    /// The poses kept, oldest first.
-    pub fn poses(&self) -> impl Iterator<Item = &Pose> {
-        self.poses.iter()
-    }
-
-    /// Checks and keeps one pose arriving now; the oldest is dropped when full.
-    pub fn push(&mut self, raw: &RawPose) -> Result<(), PoseRejected> {
-        self.push_at(raw, crate::clock::now_ns())
-    }
-
-    /// Checks and keeps one pose arriving at local time `now_ns`.
-    pub fn push_at(&mut self, raw: &RawPose, now_ns: StampNs) -> Result<(), PoseRejected> {
+    /// Checks and keeps one pose arriving at `now_ns`; true when the stream started over.
+    fn push_at(&mut self, raw: &RawPose, limits: &PoseLimits, now_ns: StampNs) -> Result<bool, PoseRejected> {
         let newest = self.poses.back().map(|p| p.stamp_ns);
         // Stamps going back after a silence: the odometry started over (VINS restarted).
-        let restarted = match (newest, self.limits.restart_after_ns, self.last_arrival_ns) {
+        let restarted = match (newest, limits.restart_after_ns, self.last_arrival_ns) {
             (Some(n), Some(after), Some(arrived)) => raw.stamp_ns <= n && now_ns.saturating_sub(arrived) >= after,
             _ => false,
         };
-        let checked = check(raw, if restarted { None } else { newest }, &self.limits, now_ns);
-        match checked {
-            Ok(pose) => {
-                if restarted {
-                    tracing::warn!(
-                        "the odometry started over: a pose at {} ns after {:.1} s of silence, before the newest ({} ns); poses start again from it",
-                        raw.stamp_ns,
-                        now_ns.saturating_sub(self.last_arrival_ns.unwrap_or(now_ns)) as f64 * 1e-9,
-                        newest.unwrap_or(0)
-                    );
-                    self.poses.clear();
-                    self.counters.restarts += 1;
-                }
-                if self.poses.len() == self.capacity {
-                    self.poses.pop_front();
-                }
-                self.poses.push_back(pose);
-                self.last_arrival_ns = Some(now_ns);
-                self.counters.accepted += 1;
-                Ok(())
-            }
-            Err(e) => {
-                self.counters.rejected += 1;
-                Err(e)
-            }
+        let pose = check(raw, if restarted { None } else { newest }, limits, now_ns)?;
+        if restarted {
+            tracing::warn!(
+                "the odometry started over: a pose at {} ns after {:.1} s of silence, before the newest ({} ns); poses start again from it",
+                raw.stamp_ns,
+                now_ns.saturating_sub(self.last_arrival_ns.unwrap_or(now_ns)) as f64 * 1e-9,
+                newest.unwrap_or(0)
+            );
+            self.poses.clear();
         }
+        if self.poses.len() == self.capacity {
+            self.poses.pop_front();
+        }
+        self.poses.push_back(pose);
+        self.last_arrival_ns = Some(now_ns);
+        Ok(restarted)
     }
 
-    /// The pose at `stamp_ns`, interpolated between its neighbours.
-    pub fn at(&mut self, stamp_ns: StampNs) -> Result<Isometry3<f64>, NoPose> {
-        let found = self.lookup(stamp_ns);
-        if found.is_err() {
-            self.counters.missing += 1;
-        }
-        found
-    }
-
-    fn lookup(&self, stamp_ns: StampNs) -> Result<Isometry3<f64>, NoPose> {
+    /// The pose at `stamp_ns`, interpolated between its neighbours no further apart than
+    /// `max_gap_ns`, and not across a jump.
+    fn at(&self, stamp_ns: StampNs, max_gap_ns: u64) -> Result<Isometry3<f64>, NoPose> {
         let (first, last) = match (self.poses.front(), self.poses.back()) {
             (Some(f), Some(l)) => (f, l),
             _ => return Err(NoPose::Empty),
@@ -228,12 +187,8 @@ impl PoseBuffer {
         }
         let a = &self.poses[i - 1];
         let gap = b.stamp_ns - a.stamp_ns;
-        if gap > self.limits.max_gap_ns {
-            return Err(NoPose::Gap {
-                stamp_ns,
-                gap_ms: gap as f64 * 1e-6,
-                max_ms: self.limits.max_gap_ns as f64 * 1e-6,
-            });
+        if gap > max_gap_ns {
+            return Err(NoPose::Gap { stamp_ns, gap_ms: gap as f64 * 1e-6, max_ms: max_gap_ns as f64 * 1e-6 });
         }
         let dt = gap as f64 * 1e-9;
         let speed = (b.transform.translation.vector - a.transform.translation.vector).norm() / dt;
@@ -241,10 +196,163 @@ impl PoseBuffer {
         if speed > MAX_SPEED_M_S || turn > MAX_TURN_RAD_S {
             return Err(NoPose::Jump { stamp_ns, speed, turn });
         }
-        let t = (stamp_ns - a.stamp_ns) as f64 / gap as f64;
-        let p = a.transform.translation.vector.lerp(&b.transform.translation.vector, t);
-        let r = a.transform.rotation.slerp(&b.transform.rotation, t);
-        Ok(Isometry3::from_parts(Translation3::from(p), r))
+        Ok(blend(&a.transform, &b.transform, (stamp_ns - a.stamp_ns) as f64 / gap as f64))
+    }
+
+    /// The newest pose at or before `stamp_ns`.
+    fn at_or_before(&self, stamp_ns: StampNs) -> Option<&Pose> {
+        let i = self.poses.partition_point(|p| p.stamp_ns <= stamp_ns);
+        i.checked_sub(1).map(|i| &self.poses[i])
+    }
+}
+
+/// `a` moved a fraction `t` of the way to `b`: lerp in position, slerp in rotation.
+fn blend(a: &Isometry3<f64>, b: &Isometry3<f64>, t: f64) -> Isometry3<f64> {
+    let p = a.translation.vector.lerp(&b.translation.vector, t);
+    Isometry3::from_parts(Translation3::from(p), a.rotation.slerp(&b.rotation, t))
+}
+
+/// Propagated poses further apart than this are not interpolated: the IMU-rate stream
+/// comes every few milliseconds.
+pub const MAX_PROPAGATED_GAP_NS: u64 = 50_000_000;
+
+/// The odometry's poses: the optimised ones (VINS-Fusion's `odometry`, 10-20 Hz), and,
+/// when VINS sends them, the IMU-rate propagated ones between them (`imu_propagate`).
+///
+/// A frame's pose is interpolated between the optimised poses around it. With propagated
+/// poses around the frame and around those optimised poses, the motion between them is
+/// taken from the propagated stream instead of a straight line: the pose is the
+/// propagated one, corrected by the optimised poses' offsets from the propagated stream
+/// (blended between the two); after the newest optimised pose, by its offset alone, so a
+/// frame need not wait for the next optimised pose (at most `max_gap` after the last).
+pub struct PoseBuffer {
+    optimised: Track,
+    propagated: Track,
+    limits: PoseLimits,
+    pub counters: PoseCounters,
+}
+
+impl PoseBuffer {
+    /// Keeps the newest `capacity` poses; frames between poses further apart than
+    /// `max_gap_ns` get none. Checks no stamp against the local clock ([`PoseLimits::gap_only`]).
+    pub fn new(capacity: usize, max_gap_ns: u64) -> PoseBuffer {
+        PoseBuffer::with_limits(capacity, PoseLimits::gap_only(max_gap_ns))
+    }
+
+    pub fn with_limits(capacity: usize, limits: PoseLimits) -> PoseBuffer {
+        PoseBuffer {
+            optimised: Track::new(capacity),
+            propagated: Track::new(capacity),
+            limits,
+            counters: PoseCounters::default(),
+        }
+    }
+
+    /// Optimised poses kept.
+    pub fn len(&self) -> usize {
+        self.optimised.poses.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.optimised.poses.is_empty()
+    }
+
+    /// The optimised poses kept, oldest first.
+    pub fn poses(&self) -> impl Iterator<Item = &Pose> {
+        self.optimised.poses.iter()
+    }
+
+    /// Checks and keeps one pose arriving now; the oldest is dropped when full.
+    pub fn push(&mut self, raw: &RawPose) -> Result<(), PoseRejected> {
+        self.push_at(raw, crate::clock::now_ns())
+    }
+
+    /// Checks and keeps one optimised pose arriving at local time `now_ns`.
+    pub fn push_at(&mut self, raw: &RawPose, now_ns: StampNs) -> Result<(), PoseRejected> {
+        let pushed = self.optimised.push_at(raw, &self.limits, now_ns);
+        self.count(pushed, false)
+    }
+
+    /// Checks and keeps one propagated (IMU-rate) pose arriving at local time `now_ns`.
+    pub fn push_propagated_at(&mut self, raw: &RawPose, now_ns: StampNs) -> Result<(), PoseRejected> {
+        let pushed = self.propagated.push_at(raw, &self.limits, now_ns);
+        self.count(pushed, true)
+    }
+
+    fn count(&mut self, pushed: Result<bool, PoseRejected>, propagated: bool) -> Result<(), PoseRejected> {
+        match pushed {
+            Ok(restarted) => {
+                self.counters.restarts += restarted as u64;
+                if propagated {
+                    self.counters.propagated += 1;
+                } else {
+                    self.counters.accepted += 1;
+                }
+                Ok(())
+            }
+            Err(e) => {
+                self.counters.rejected += 1;
+                Err(e)
+            }
+        }
+    }
+
+    /// The pose at `stamp_ns`; a miss is counted.
+    pub fn at(&mut self, stamp_ns: StampNs) -> Result<Isometry3<f64>, NoPose> {
+        let found = self.lookup(stamp_ns);
+        if found.is_err() {
+            self.counters.missing += 1;
+        }
+        found
+    }
+
+    /// The pose at `stamp_ns` without counting a miss: for a frame that may ask again once
+    /// newer poses arrive (it counts its final miss with [`PoseBuffer::count_missing`]).
+    pub fn lookup(&self, stamp_ns: StampNs) -> Result<Isometry3<f64>, NoPose> {
+        let max_gap = self.limits.max_gap_ns;
+        match self.optimised.at(stamp_ns, max_gap) {
+            Ok(straight) => Ok(self.densified(stamp_ns).unwrap_or(straight)),
+            Err(NoPose::NotYet { last_ns, .. })
+                if stamp_ns - last_ns <= max_gap
+                    && let Some(pose) = self.propagated_after(stamp_ns) =>
+            {
+                Ok(pose)
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    /// The offset of optimised pose `p` from the propagated stream at its stamp.
+    fn correction(&self, p: &Pose) -> Option<Isometry3<f64>> {
+        let propagated = self.propagated.at(p.stamp_ns, MAX_PROPAGATED_GAP_NS).ok()?;
+        Some(p.transform * propagated.inverse())
+    }
+
+    /// Between two optimised poses: the propagated pose, corrected.
+    fn densified(&self, stamp_ns: StampNs) -> Option<Isometry3<f64>> {
+        let propagated = self.propagated.at(stamp_ns, MAX_PROPAGATED_GAP_NS).ok()?;
+        let i = self.optimised.poses.partition_point(|p| p.stamp_ns < stamp_ns);
+        let b = self.optimised.poses.get(i)?;
+        let a = i.checked_sub(1).map_or(b, |i| &self.optimised.poses[i]);
+        let (ca, cb) = (self.correction(a)?, self.correction(b)?);
+        let t = if b.stamp_ns > a.stamp_ns {
+            (stamp_ns - a.stamp_ns) as f64 / (b.stamp_ns - a.stamp_ns) as f64
+        } else {
+            0.0
+        };
+        Some(blend(&ca, &cb, t) * propagated)
+    }
+
+    /// After the newest optimised pose: the propagated pose, corrected by its offset.
+    fn propagated_after(&self, stamp_ns: StampNs) -> Option<Isometry3<f64>> {
+        let propagated = self.propagated.at(stamp_ns, MAX_PROPAGATED_GAP_NS).ok()?;
+        let last = self.optimised.at_or_before(stamp_ns)?;
+        Some(self.correction(last)? * propagated)
+    }
+
+    /// Counts a frame that ended without a pose.
+    pub fn count_missing(&mut self) {
+        self.counters.missing += 1;
     }
 }
 

@@ -42,7 +42,7 @@ static ALLOCATOR: Counting = Counting;
 fn take(buffer: &Mutex<PoseBuffer>, bytes: &[u8]) {
     let pose =
         cdr::from_slice::<Odometry>(bytes).map_err(|e| e.to_string()).and_then(|m| convert::pose_of_odometry(&m));
-    polymap::runtime::odometry::take(buffer, "/odometry", pose);
+    polymap::runtime::odometry::take(buffer, "/odometry", polymap::runtime::odometry::Stream::Optimised, pose);
 }
 
 #[test]

@@ -416,9 +416,13 @@ fn every_numeric_command_line_option_given_absurd_values_is_refused_or_handled()
         &["run", "--duration", "{}", "--config", config],
         &["demo", "--duration", "{}", "--config", config, "--out", out],
         &["demo", "--duration", "0.001", "--vins-rate", "{}", "--config", config, "--out", out],
+        &["demo", "--duration", "0.001", "--vins-latency-ms", "{}", "--config", config, "--out", out],
+        &["demo", "--duration", "0.001", "--vins-jitter-ms", "{}", "--config", config, "--out", out],
         &["mock-vins", seq, "--duration", "{}", "--config", config],
         &["mock-vins", seq, "--duration", "0.01", "--rate", "{}", "--config", config],
         &["mock-vins", seq, "--duration", "0.01", "--drift", "{}", "--config", config],
+        &["mock-vins", seq, "--duration", "0.01", "--latency-ms", "{}", "--config", config],
+        &["mock-vins", seq, "--duration", "0.01", "--jitter-ms", "{}", "--config", config],
     ];
     for command in commands {
         for value in ["nan", "inf", "-inf", "0", "-1", "1e308", "-1e308", "1e-300"] {

@@ -31,7 +31,7 @@ async fn wait_for_peer(session: &zenoh::Session) {
 
 struct Pair {
     publisher: zenoh::Session,
-    _mapper: (zenoh::Session, Node, polymap::ros2::Subscription),
+    _mapper: (zenoh::Session, Node, Vec<polymap::ros2::Subscription>),
     buffer: Arc<Mutex<PoseBuffer>>,
     /// The key rmw_zenoh (Jazzy) puts /odometry's nav_msgs/Odometry on.
     key: String,

@@ -154,3 +154,63 @@ fn an_odometry_that_starts_over_is_followed_after_a_silence() {
     assert!((t.translation.x - 5.005).abs() < 1e-12);
     assert!(matches!(buf.at(NOW - 950 * MS), Err(NoPose::NotYet { .. })), "nothing of the old odometry answers");
 }
+
+/// A body bobbing 12 mm at 8 Hz while it walks 0.5 m/s along x, yawing 2 deg at 4 Hz.
+fn bobbing(stamp_ms: u64) -> RawPose {
+    let t = stamp_ms as f64 * 1e-3;
+    let q = UnitQuaternion::from_axis_angle(
+        &Vector3::z_axis(),
+        (2.0 * (8.0 * std::f64::consts::PI * t).sin()).to_radians(),
+    );
+    let z = 1.0 + 0.012 * (8.0 * std::f64::consts::PI * t).sin().powi(2);
+    RawPose { stamp_ns: stamp_ms * MS, position: [0.5 * t, 0.0, z], quat_xyzw: [q.i, q.j, q.k, q.w] }
+}
+
+/// `p` moved by a constant offset: the optimised estimate, off the propagated one.
+fn offset(mut p: RawPose, dz: f64) -> RawPose {
+    p.position[2] += dz;
+    p
+}
+
+#[test]
+fn propagated_poses_carry_the_motion_between_optimised_ones() {
+    let mut straight = PoseBuffer::new(1000, 250 * MS);
+    let mut dense = PoseBuffer::new(1000, 250 * MS);
+    // Optimised at 10 Hz, 3 mm above the propagated stream (200 Hz), which follows the bob.
+    for k in 0..=10u64 {
+        let p = offset(bobbing(1000 + 100 * k), 0.003);
+        straight.push_at(&p, 0).unwrap();
+        dense.push_at(&p, 0).unwrap();
+    }
+    for k in 0..=200u64 {
+        dense.push_propagated_at(&bobbing(1000 + 5 * k), 0).unwrap();
+    }
+    let mut worst = (0.0f64, 0.0f64);
+    for stamp_ms in (1000..2000).step_by(7) {
+        let want = offset(bobbing(stamp_ms), 0.003);
+        let err = |b: &PoseBuffer| (b.lookup(stamp_ms * MS).unwrap().translation.z - want.position[2]).abs();
+        worst = (worst.0.max(err(&straight)), worst.1.max(err(&dense)));
+        let yaw = dense.lookup(stamp_ms * MS).unwrap().rotation.euler_angles().2;
+        let want_yaw = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            want.quat_xyzw[3],
+            want.quat_xyzw[0],
+            want.quat_xyzw[1],
+            want.quat_xyzw[2],
+        ))
+        .euler_angles()
+        .2;
+        assert!((yaw - want_yaw).abs() < 1e-3, "yaw at {stamp_ms} ms: {yaw} vs {want_yaw}");
+    }
+    assert!(worst.0 > 0.005, "straight lines miss the bob: {} m", worst.0);
+    assert!(worst.1 < 2e-4, "the propagated stream follows it: {} m", worst.1);
+    // After the newest optimised pose (2000 ms), the propagated one with its offset, up to
+    // a gap after it; beyond the propagated stream, none yet.
+    for k in 201..=210u64 {
+        dense.push_propagated_at(&bobbing(1000 + 5 * k), 0).unwrap();
+    }
+    let after = dense.lookup(2030 * MS).unwrap();
+    assert!((after.translation.z - offset(bobbing(2030), 0.003).position[2]).abs() < 1e-9);
+    assert!(matches!(dense.lookup(2060 * MS), Err(NoPose::NotYet { .. })));
+    assert!(matches!(straight.lookup(2030 * MS), Err(NoPose::NotYet { .. })));
+    assert_eq!(dense.counters.propagated, 211);
+}

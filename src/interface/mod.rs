@@ -53,6 +53,8 @@ pub struct Interface {
     pub get_foothold: Service<GetFoothold>,
     /// VINS's odometry in (`/odometry` by default, as VINS-Fusion's ROS 2 port publishes it).
     pub odometry: OdometryTopic,
+    /// VINS's IMU-rate propagated odometry in (`/imu_propagate`), when used.
+    pub imu_propagate: Option<Topic<Odometry>>,
     /// The D435i's streams for VINS, under realsense-ros's names (`/camera/camera/...`).
     pub infra: [InfraTopics; 2],
     pub imu: Topic<Imu>,
@@ -86,6 +88,7 @@ impl Interface {
                 OdometryType::Odometry => OdometryTopic::Odometry(Topic::new(odometry, Qos::reliable(100))),
                 OdometryType::PoseStamped => OdometryTopic::PoseStamped(Topic::new(odometry, Qos::reliable(100))),
             },
+            imu_propagate: config.ros2.imu_propagate.clone().map(|name| Topic::new(name, Qos::reliable(400))),
             infra: [infra(1), infra(2)],
             imu: Topic::new(cam("imu"), Qos::reliable(400)),
         }

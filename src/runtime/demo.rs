@@ -9,6 +9,7 @@ use anyhow::Result;
 
 use super::status::Report;
 use crate::config::Config;
+use crate::mock::vins::MockVinsOptions;
 use crate::ros2::session::{free_loopback_port, loopback_json5};
 use crate::sequence::Sequence;
 
@@ -16,10 +17,10 @@ use crate::sequence::Sequence;
 pub const ROUTER_PORT: u16 = 7447;
 
 /// Runs for `duration`; the map is saved where `config.map.snapshot_path` says.
-pub async fn demo(config: &Config, duration: Duration, vins_rate_hz: f64) -> Result<Report> {
-    let opts = crate::mock::vins::MockVinsOptions { rate_hz: vins_rate_hz, drift_mm_per_s: 0.0, duration: None };
+pub async fn demo(config: &Config, duration: Duration, vins: MockVinsOptions) -> Result<Report> {
+    let opts = MockVinsOptions { drift_mm_per_s: 0.0, duration: None, ..vins };
     if let Some(p) = opts.problem() {
-        anyhow::bail!("{}", p.replace("--rate", "--vins-rate"));
+        anyhow::bail!("{}", p.replace("--", "--vins-"));
     }
     let port = if std::net::TcpListener::bind(("127.0.0.1", ROUTER_PORT)).is_ok() {
         ROUTER_PORT

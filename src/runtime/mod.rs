@@ -8,16 +8,19 @@
 //! D435i (mock or real) ─► infra1, infra2, imu for VINS
 //! ```
 //!
-//! - [`slot`]: the newest-frame slot; [`worker`]: the extractor thread;
+//! - [`slot`]: the newest-frame slot; [`worker`]: the extractor thread; [`awaiting`]: extracted
+//!   frames waiting for their poses;
 //! - [`sources`]: the depth source and the D435i streams; [`odometry`]: poses in;
 //! - [`publish`]: what the worker made, out; [`services`]: the map and footholds on request;
 //! - [`status`]: counters and the status line; [`demo`]: mock VINS and mapper together;
 //! - [`router`]: `polymap router`, a Zenoh router in a process of its own.
 //!
-//! When extraction falls behind, the newest frame wins. A frame with no odometry pose within
-//! the gap is skipped and counted. SIGINT / SIGTERM (or `--duration`) stop it; the map is
+//! When extraction falls behind, the newest frame wins. An extracted frame waits (in a short
+//! queue, never holding up the next extraction) for the odometry pose after its stamp, at most
+//! `poses.max_wait_s`; one that cannot get a pose is skipped and counted with the reason. SIGINT / SIGTERM (or `--duration`) stop it; the map is
 //! saved. A snapshot that cannot be written is logged, counted and tried again next period.
 
+pub mod awaiting;
 pub mod demo;
 pub mod odometry;
 pub mod publish;

@@ -11,27 +11,50 @@ use crate::pose::{PoseBuffer, RawPose};
 use crate::ros2::cdr::CdrError;
 use crate::ros2::{Node, Ros2Error, Subscription};
 
-/// Feeds `buffer` from the odometry topic.
+/// Feeds `buffer` from the odometry topic (and the propagated odometry's, when used).
 pub async fn subscribe(
     node: &Node,
     interface: &Interface,
     buffer: Arc<Mutex<PoseBuffer>>,
-) -> Result<Subscription, Ros2Error> {
+) -> Result<Vec<Subscription>, Ros2Error> {
     let name = interface.odometry_name().to_string();
-    match &interface.odometry {
+    let optimised = buffer.clone();
+    let mut subscriptions = vec![match &interface.odometry {
         OdometryTopic::Odometry(topic) => {
             node.subscribe(topic, move |m| {
-                take(&buffer, &name, m.map_err(decode_error).and_then(|m| convert::pose_of_odometry(&m)))
+                let pose = m.map_err(decode_error).and_then(|m| convert::pose_of_odometry(&m));
+                take(&optimised, &name, Stream::Optimised, pose)
             })
-            .await
+            .await?
         }
         OdometryTopic::PoseStamped(topic) => {
             node.subscribe(topic, move |m| {
-                take(&buffer, &name, m.map_err(decode_error).and_then(|m| convert::pose_of_pose_stamped(&m)))
+                let pose = m.map_err(decode_error).and_then(|m| convert::pose_of_pose_stamped(&m));
+                take(&optimised, &name, Stream::Optimised, pose)
             })
-            .await
+            .await?
         }
+    }];
+    if let Some(topic) = &interface.imu_propagate {
+        let name = topic.name.to_string();
+        subscriptions.push(
+            node.subscribe(topic, move |m| {
+                let pose = m.map_err(decode_error).and_then(|m| convert::pose_of_odometry(&m));
+                take(&buffer, &name, Stream::Propagated, pose)
+            })
+            .await?,
+        );
     }
+    Ok(subscriptions)
+}
+
+/// Which of VINS's streams a pose came on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stream {
+    /// The optimised odometry.
+    Optimised,
+    /// The IMU-rate propagated odometry.
+    Propagated,
 }
 
 fn decode_error(e: CdrError) -> String {
@@ -39,10 +62,16 @@ fn decode_error(e: CdrError) -> String {
 }
 
 /// One message's pose into the buffer, or counted out.
-pub fn take(buffer: &Mutex<PoseBuffer>, topic: &str, pose: Result<RawPose, String>) {
+pub fn take(buffer: &Mutex<PoseBuffer>, topic: &str, stream: Stream, pose: Result<RawPose, String>) {
     let mut buf = buffer.lock();
+    let now = crate::clock::now_ns();
     let problem = match pose {
-        Ok(raw) => buf.push(&raw).err().map(|e| e.to_string()),
+        Ok(raw) => match stream {
+            Stream::Optimised => buf.push_at(&raw, now),
+            Stream::Propagated => buf.push_propagated_at(&raw, now),
+        }
+        .err()
+        .map(|e| e.to_string()),
         Err(e) => {
             buf.counters.undecodable += 1;
             Some(e)

@@ -3,6 +3,7 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use super::awaiting::Skip;
 use crate::pose::PoseCounters;
 
 /// Counts shared by the tasks.
@@ -12,7 +13,8 @@ pub struct Counters {
     pub processed: AtomicU64,
     /// Replaced in the slot by a newer frame before the extractor took them.
     pub dropped: AtomicU64,
-    pub without_pose: AtomicU64,
+    /// Extracted frames not mapped, by why ([`Skip`] as the index).
+    pub skipped: [AtomicU64; Skip::ALL.len()],
     /// Frames the extractor refused (a malformed frame).
     pub extraction_failed: AtomicU64,
     /// Service requests that did not decode.
@@ -27,7 +29,10 @@ pub struct Report {
     pub frames_in: u64,
     pub processed: u64,
     pub dropped: u64,
+    /// Extracted frames that got no pose: every skip but [`Skip::Overflow`].
     pub without_pose: u64,
+    /// Extracted frames not mapped, by why ([`Skip`] as the index).
+    pub skipped: [u64; Skip::ALL.len()],
     pub extraction_failed: u64,
     pub requests_refused: u64,
     pub snapshots_failed: u64,
@@ -38,6 +43,10 @@ pub struct Report {
 }
 
 impl Counters {
+    pub fn count_skip(&self, why: Skip) {
+        self.skipped[why as usize].fetch_add(1, Ordering::Relaxed);
+    }
+
     /// The counts now, with what the caller knows of the rest.
     pub fn report(
         &self,
@@ -47,11 +56,17 @@ impl Counters {
         map_polygons: usize,
     ) -> Report {
         let get = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        let skipped = Skip::ALL.map(|why| get(&self.skipped[why as usize]));
         Report {
             frames_in: get(&self.frames_in),
             processed: get(&self.processed),
             dropped: get(&self.dropped),
-            without_pose: get(&self.without_pose),
+            without_pose: Skip::ALL
+                .iter()
+                .filter(|&&why| why != Skip::Overflow)
+                .map(|&why| skipped[why as usize])
+                .sum(),
+            skipped,
             extraction_failed: get(&self.extraction_failed),
             requests_refused: get(&self.requests_refused),
             snapshots_failed: get(&self.snapshots_failed),
@@ -79,6 +94,14 @@ impl std::fmt::Display for Report {
             self.drift_z * 1e3,
             self.map_polygons
         )?;
+        let skipped: Vec<String> = Skip::ALL
+            .iter()
+            .filter(|&&why| self.skipped[why as usize] > 0)
+            .map(|&why| format!("{} {}", why.name(), self.skipped[why as usize]))
+            .collect();
+        if !skipped.is_empty() {
+            write!(f, "; skipped: {}", skipped.join(", "))?;
+        }
         for (what, n) in [
             ("frames not extracted", self.extraction_failed),
             ("requests refused", self.requests_refused),

@@ -1,28 +1,33 @@
-//! The extractor thread: the newest frame from the slot, its polygons, the odometry pose at
-//! its stamp, the map update; out goes a [`FrameEvent`] in polymap's own types (the publisher
-//! turns it into messages). CPU and GPU work stay off the async runtime.
+//! The extractor thread takes the newest frame from the slot and extracts its polygons; the
+//! map thread queues each extracted frame until the odometry pose at its stamp has arrived
+//! ([`super::awaiting`]), updates the map, and sends a [`FrameEvent`] in polymap's own types
+//! (the publisher turns it into messages). Extraction never waits for a pose or the map.
+//! CPU and GPU work stay off the async runtime.
 //!
-//! The extractor is made on this thread before start-up goes on, so a backend that cannot
-//! run (`backend = "gpu"` without a GPU) stops start-up with the reason. A panic here ends
-//! the thread at once with what it was doing: the runtime then stops, saving the map unless
-//! the panic came in the middle of changing it.
+//! The extractor is made on its thread before start-up goes on, so a backend that cannot
+//! run (`backend = "gpu"` without a GPU) stops start-up with the reason. A panic in either
+//! thread ends both at once with what it was doing: the runtime then stops, saving the map
+//! unless the panic came in the middle of changing it.
 
 use std::panic::AssertUnwindSafe;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use anyhow::{Result, anyhow};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use parking_lot::Mutex;
 
+use super::awaiting::{AwaitingPose, Settled, Skip};
 use super::slot::Slot;
 use super::status::Counters;
+use crate::clock::now_ns;
 use crate::config::{Backend, Config};
-use crate::extract::{Extractor, Polygon};
+use crate::extract::{Extractor, FramePolygons, Polygon};
+use crate::grid::Grid;
 use crate::map::{MapPolygon, PolygonMap};
-use crate::pose::{NoPose, PoseBuffer};
-use crate::types::StampNs;
+use crate::pose::PoseBuffer;
+use crate::types::{Intrinsics, StampNs};
 
 /// What one frame made: its polygons in the map's frame, and what it changed in the map.
 pub struct FrameEvent {
@@ -58,85 +63,231 @@ pub struct Shared {
     pub counters: Arc<Counters>,
 }
 
-/// Starts the thread once its extractor is made; an extractor that cannot be made is the error.
+/// What the extractor thread hands the map thread.
+enum Handoff {
+    Frame(Extracted),
+    /// The extractor thread ended (a panic, or nobody listens any more).
+    Ended(WorkerEnd),
+}
+
+/// Starts the extractor and map threads once the extractor is made (an extractor that cannot
+/// be made is the error); the handle is the map thread's, which ends with both. Two threads,
+/// so that neither a pose still to come nor the map's update ever holds up the next frame.
 pub fn spawn(
     config: &Config,
     shared: Shared,
     out: tokio::sync::mpsc::Sender<FrameEvent>,
 ) -> Result<std::thread::JoinHandle<WorkerEnd>> {
-    let config = config.clone();
     let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<Backend, String>>();
-    let thread = std::thread::Builder::new().name("extractor".into()).spawn(move || {
-        let mut extractor = match Extractor::new(&config.pipeline) {
+    let (handoff_tx, handoff_rx) = std::sync::mpsc::sync_channel::<Handoff>(MAX_AWAITING);
+    let Shared { slot, stop, poses, map, counters } = shared;
+    let pipeline = config.pipeline.clone();
+    let (stop_x, counters_x) = (stop.clone(), counters.clone());
+    let extractor_thread = std::thread::Builder::new().name("extractor".into()).spawn(move || {
+        let mut extractor = match Extractor::new(&pipeline) {
             Ok(e) => {
                 let _ = ready_tx.send(Ok(e.backend()));
                 e
             }
             Err(e) => {
                 let _ = ready_tx.send(Err(format!("{e:#}")));
-                return WorkerEnd::Stopped;
+                return;
             }
         };
-        let body_camera = extrinsic(&config);
-        let gap_ns = (config.poses.max_gap_s * 1e9) as u64;
-        let Shared { slot, stop, poses, map, counters } = shared;
-        while !stop.load(Ordering::Relaxed) {
-            let Some((frame, intrinsics)) = slot.take(Duration::from_millis(100)) else { continue };
-            let extracted = std::panic::catch_unwind(AssertUnwindSafe(|| extractor.extract(&frame, &intrinsics)));
-            let (polys, stages, _) = match extracted {
-                Ok(Ok(r)) => r,
-                Ok(Err(e)) => {
-                    counters.extraction_failed.fetch_add(1, Ordering::Relaxed);
-                    tracing::warn!("frame at {} ns not extracted: {e:#}", frame.stamp_ns);
-                    continue;
-                }
-                Err(panic) => return panicked("extracting a frame", panic, true),
-            };
-            let Some(world_body) = pose_at(&poses, frame.stamp_ns, gap_ns, &stop) else {
-                counters.without_pose.fetch_add(1, Ordering::Relaxed);
-                continue;
-            };
-            let t_world_camera = world_body * body_camera;
-            let mut m = map.lock();
-            let updated = std::panic::catch_unwind(AssertUnwindSafe(|| {
-                let from_version = m.version();
-                let update = m.update(&polys.polygons, &t_world_camera, &intrinsics, Some(&stages.depth));
-                let corrected = m.corrected(&t_world_camera);
-                let robot = m.corrected(&world_body).translation.vector;
-                let version = m.version();
-                let mut polygons_of = |ids: &[u64]| ids.iter().filter_map(|&id| m.polygon(id)).collect::<Vec<_>>();
-                FrameEvent {
-                    stamp_ns: frame.stamp_ns,
-                    from_version,
-                    version,
-                    robot: [robot.x, robot.y, robot.z],
-                    polygons: polys.polygons.iter().map(|p| p.transformed(&corrected)).collect(),
-                    added: polygons_of(&update.added),
-                    changed: polygons_of(&update.changed),
-                    removed: update.removed,
-                    drift_z: m.drift.z,
-                    drift_var: m.drift.var,
-                }
-            }));
-            drop(m);
-            let event = match updated {
-                Ok(event) => event,
-                Err(panic) => return panicked("updating the map", panic, false),
-            };
-            counters.processed.fetch_add(1, Ordering::Relaxed);
-            if out.blocking_send(event).is_err() {
-                break;
-            }
-        }
-        WorkerEnd::Stopped
+        let end = extract_frames(&mut extractor, &slot, &stop_x, &counters_x, &handoff_tx);
+        let _ = handoff_tx.send(Handoff::Ended(end));
     })?;
     match ready_rx.recv() {
-        Ok(Ok(backend)) => {
-            tracing::info!("extractor ready: {backend} backend");
-            Ok(thread)
+        Ok(Ok(backend)) => tracing::info!("extractor ready: {backend} backend"),
+        Ok(Err(why)) => return Err(anyhow!("the extractor could not start: {why}")),
+        Err(_) => return Err(anyhow!("the extractor thread ended before it started")),
+    }
+    let mut mapper = FrameMapper::new(config, poses, map, counters);
+    let map_thread = std::thread::Builder::new().name("mapper".into()).spawn(move || {
+        let end = map_frames(&mut mapper, &handoff_rx, &stop, &out);
+        // The extractor stops with the map thread, and is waited for.
+        stop.store(true, Ordering::Relaxed);
+        drop(handoff_rx);
+        let _ = extractor_thread.join();
+        end
+    })?;
+    Ok(map_thread)
+}
+
+/// The extractor thread's loop: the newest frame from the slot, extracted, handed on.
+fn extract_frames(
+    extractor: &mut Extractor,
+    slot: &Slot,
+    stop: &AtomicBool,
+    counters: &Counters,
+    handoff: &std::sync::mpsc::SyncSender<Handoff>,
+) -> WorkerEnd {
+    while !stop.load(Ordering::Relaxed) {
+        let Some((frame, intrinsics)) = slot.take(IDLE_WAIT) else { continue };
+        let extracted = std::panic::catch_unwind(AssertUnwindSafe(|| extractor.extract(&frame, &intrinsics)));
+        let (polygons, stages, _) = match extracted {
+            Ok(Ok(r)) => r,
+            Ok(Err(e)) => {
+                counters.extraction_failed.fetch_add(1, Ordering::Relaxed);
+                tracing::warn!("frame at {} ns not extracted: {e:#}", frame.stamp_ns);
+                continue;
+            }
+            Err(panic) => return panicked("extracting a frame", panic, true),
+        };
+        let extracted = Extracted { polygons, depth: stages.depth, intrinsics };
+        match handoff.try_send(Handoff::Frame(extracted)) {
+            Ok(()) => {}
+            // The map thread is a whole queue behind: this frame goes.
+            Err(std::sync::mpsc::TrySendError::Full(_)) => counters.count_skip(Skip::Overflow),
+            Err(std::sync::mpsc::TrySendError::Disconnected(_)) => break,
         }
-        Ok(Err(why)) => Err(anyhow!("the extractor could not start: {why}")),
-        Err(_) => Err(anyhow!("the extractor thread ended before it started")),
+    }
+    WorkerEnd::Stopped
+}
+
+/// The map thread's loop: extracted frames in, each mapped once its pose has arrived.
+fn map_frames(
+    mapper: &mut FrameMapper,
+    handoff: &std::sync::mpsc::Receiver<Handoff>,
+    stop: &AtomicBool,
+    out: &tokio::sync::mpsc::Sender<FrameEvent>,
+) -> WorkerEnd {
+    use std::sync::mpsc::RecvTimeoutError;
+    while !stop.load(Ordering::Relaxed) {
+        // While frames wait for poses, look for new poses often; else sleep until a frame.
+        let wait = if mapper.waiting() == 0 { IDLE_WAIT } else { POSE_POLL };
+        match handoff.recv_timeout(wait) {
+            Ok(Handoff::Frame(f)) => mapper.queue(f.polygons, f.depth, f.intrinsics, now_ns()),
+            Ok(Handoff::Ended(end)) => return end,
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => return WorkerEnd::Stopped,
+        }
+        let events = match mapper.map_ready(now_ns()) {
+            Ok(events) => events,
+            Err(end) => return end,
+        };
+        for event in events {
+            if out.blocking_send(event).is_err() {
+                return WorkerEnd::Stopped;
+            }
+        }
+    }
+    WorkerEnd::Stopped
+}
+
+/// How long an idle thread sleeps before looking at `stop` again.
+const IDLE_WAIT: Duration = Duration::from_millis(100);
+/// How often frames waiting for their poses look for them: a pose that arrives is used
+/// within this, and a new frame wakes the map thread at once.
+const POSE_POLL: Duration = Duration::from_millis(2);
+/// Frames that may wait for their poses at once: 0.5 s of a 30 Hz camera, more than
+/// `poses.max_wait_s` holds at its default.
+pub const MAX_AWAITING: usize = 16;
+
+/// An extracted frame, as it waits for its pose.
+pub struct Extracted {
+    pub polygons: FramePolygons,
+    /// The depth in metres, which clears the map where the frame sees through it.
+    pub depth: Grid<f32>,
+    pub intrinsics: Intrinsics,
+}
+
+/// Extracted frames to the map: each waits for the pose at its stamp (never holding up the
+/// next extraction), then updates the map and becomes a [`FrameEvent`].
+pub struct FrameMapper {
+    body_camera: Isometry3<f64>,
+    awaiting: AwaitingPose<Extracted>,
+    poses: Arc<Mutex<PoseBuffer>>,
+    map: Arc<Mutex<PolygonMap>>,
+    pub counters: Arc<Counters>,
+}
+
+impl FrameMapper {
+    pub fn new(
+        config: &Config,
+        poses: Arc<Mutex<PoseBuffer>>,
+        map: Arc<Mutex<PolygonMap>>,
+        counters: Arc<Counters>,
+    ) -> FrameMapper {
+        let max_wait_ns = (config.poses.max_wait_s * 1e9) as u64;
+        FrameMapper {
+            body_camera: extrinsic(config),
+            awaiting: AwaitingPose::new(MAX_AWAITING, max_wait_ns),
+            poses,
+            map,
+            counters,
+        }
+    }
+
+    /// Frames waiting for their poses.
+    pub fn waiting(&self) -> usize {
+        self.awaiting.len()
+    }
+
+    /// Queues a frame extracted at local time `now_ns` for its pose.
+    pub fn queue(&mut self, polygons: FramePolygons, depth: Grid<f32>, intrinsics: Intrinsics, now_ns: StampNs) {
+        let stamp_ns = polygons.stamp_ns;
+        if let Some(Settled::Skipped(_, why)) =
+            self.awaiting.push(stamp_ns, Extracted { polygons, depth, intrinsics }, now_ns)
+        {
+            self.counters.count_skip(why);
+        }
+    }
+
+    /// Maps every waiting frame whose pose is known at local time `now_ns`, in stamp order,
+    /// and counts those that cannot get one; a panic in the map's update ends the worker.
+    pub fn map_ready(&mut self, now_ns: StampNs) -> Result<Vec<FrameEvent>, WorkerEnd> {
+        let settled = self.awaiting.settle(&mut self.poses.lock(), now_ns);
+        let mut events = Vec::new();
+        for s in settled {
+            match s {
+                Settled::Posed(frame, world_body) => {
+                    let mut map = self.map.lock();
+                    let updated = std::panic::catch_unwind(AssertUnwindSafe(|| {
+                        update_map(&mut map, &frame, &world_body, &self.body_camera)
+                    }));
+                    drop(map);
+                    match updated {
+                        Ok(event) => events.push(event),
+                        Err(panic) => return Err(panicked("updating the map", panic, false)),
+                    }
+                    self.counters.processed.fetch_add(1, Ordering::Relaxed);
+                }
+                Settled::Skipped(frame, why) => {
+                    self.counters.count_skip(why);
+                    tracing::debug!("frame at {} ns skipped: {}", frame.polygons.stamp_ns, why.name());
+                }
+            }
+        }
+        Ok(events)
+    }
+}
+
+/// One posed frame into the map.
+fn update_map(
+    m: &mut PolygonMap,
+    frame: &Extracted,
+    world_body: &Isometry3<f64>,
+    body_camera: &Isometry3<f64>,
+) -> FrameEvent {
+    let t_world_camera = world_body * body_camera;
+    let from_version = m.version();
+    let update = m.update(&frame.polygons.polygons, &t_world_camera, &frame.intrinsics, Some(&frame.depth));
+    let corrected = m.corrected(&t_world_camera);
+    let robot = m.corrected(world_body).translation.vector;
+    let version = m.version();
+    let mut polygons_of = |ids: &[u64]| ids.iter().filter_map(|&id| m.polygon(id)).collect::<Vec<_>>();
+    FrameEvent {
+        stamp_ns: frame.polygons.stamp_ns,
+        from_version,
+        version,
+        robot: [robot.x, robot.y, robot.z],
+        polygons: frame.polygons.polygons.iter().map(|p| p.transformed(&corrected)).collect(),
+        added: polygons_of(&update.added),
+        changed: polygons_of(&update.changed),
+        removed: update.removed,
+        drift_z: m.drift.z,
+        drift_var: m.drift.var,
     }
 }
 
@@ -148,26 +299,6 @@ fn panicked(during: &'static str, panic: Box<dyn std::any::Any + Send>, map_inta
         .unwrap_or_else(|| "(no message)".into());
     tracing::error!("the extractor thread panicked {during}: {message}");
     WorkerEnd::Panicked { during, message, map_intact }
-}
-
-/// The odometry pose at a frame's stamp, waiting up to one gap for it to arrive.
-fn pose_at(poses: &Mutex<PoseBuffer>, stamp_ns: StampNs, gap_ns: u64, stop: &AtomicBool) -> Option<Isometry3<f64>> {
-    let waited = Instant::now();
-    loop {
-        let found = poses.lock().at(stamp_ns);
-        match found {
-            Ok(t) => return Some(t),
-            Err(NoPose::NotYet { .. }) | Err(NoPose::Empty)
-                if waited.elapsed() < Duration::from_nanos(gap_ns) && !stop.load(Ordering::Relaxed) =>
-            {
-                std::thread::sleep(Duration::from_millis(2));
-            }
-            Err(e) => {
-                tracing::debug!("frame skipped: {e}");
-                return None;
-            }
-        }
-    }
 }
 
 /// T_body_camera from the config.
