@@ -31,13 +31,6 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
     let snapshot = dir.path().join("map.json");
     let extra = format!("[map]\nsnapshot_path = {:?}\n", snapshot.display().to_string());
     let (mut mapper, vins_cfg) = start_mapper(dir.path(), &seq_dir, port, 8, &extra, 11);
-    let bin = env!("CARGO_BIN_EXE_polymap");
-    let mut vins = std::process::Command::new(bin)
-        .args(["mock-vins", seq_dir.to_str().unwrap(), "--rate", "100", "--duration", "12", "--config"])
-        .arg(&vins_cfg)
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
 
     // This test is a third peer, connected to the mapper: a ROS 2 node of its own.
     let (session, node) = planner_node(port, "live_test").await;
@@ -86,6 +79,17 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
         .await
         .unwrap();
 
+    // VINS starts once this test listens: no frame has a pose, so none is mapped, before
+    // the test can see which frames were (a frame mapped unseen would widen the map beyond
+    // the truth the test holds it to).
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let bin = env!("CARGO_BIN_EXE_polymap");
+    let mut vins = std::process::Command::new(bin)
+        .args(["mock-vins", seq_dir.to_str().unwrap(), "--rate", "100", "--duration", "12", "--config"])
+        .arg(&vins_cfg)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
     tokio::time::sleep(Duration::from_secs(8)).await;
     assert!(markers.load(Ordering::Relaxed) >= 10, "RViz markers arrive");
     assert!(frames.load(Ordering::Relaxed) >= 10, "frame polygons arrive: {}", frames.load(Ordering::Relaxed));
