@@ -23,14 +23,15 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
     // A 6 s walk (180 frames) that the mock camera samples at 8 Hz: a loaded 2-core machine
     // running the test build extracts 10 frames/s or fewer, and the camera must not outrun
     // it, or the top tread, seen only in the walk's last half second, may never be
-    // processed. 8 Hz against a 6 s loop takes different frames on each pass.
+    // processed. The mocks walk it forward and back (a 12 s loop), so 13 s of mapping from
+    // any point of the loop passes the whole walk, taking other frames on the way back.
     let seq_dir = dir.path().join("straight");
     let opts = polymap::synth::SynthOptions { frames: 180, seed: 4, ..Default::default() };
     polymap::synth::generate(&opts, &seq_dir, |_, _| {}).unwrap();
     let port = free_loopback_port().unwrap();
     let snapshot = dir.path().join("map.json");
     let extra = format!("[map]\nsnapshot_path = {:?}\n", snapshot.display().to_string());
-    let (mut mapper, vins_cfg) = start_mapper(dir.path(), &seq_dir, port, 8, &extra, 11);
+    let (mut mapper, vins_cfg) = start_mapper(dir.path(), &seq_dir, port, 8, &extra, 19);
 
     // This test is a third peer, connected to the mapper: a ROS 2 node of its own.
     let (session, node) = planner_node(port, "live_test").await;
@@ -85,12 +86,12 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
     tokio::time::sleep(Duration::from_millis(500)).await;
     let bin = env!("CARGO_BIN_EXE_polymap");
     let mut vins = std::process::Command::new(bin)
-        .args(["mock-vins", seq_dir.to_str().unwrap(), "--rate", "100", "--duration", "12", "--config"])
+        .args(["mock-vins", seq_dir.to_str().unwrap(), "--rate", "100", "--duration", "17", "--config"])
         .arg(&vins_cfg)
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
-    tokio::time::sleep(Duration::from_secs(8)).await;
+    tokio::time::sleep(Duration::from_secs(13)).await;
     assert!(markers.load(Ordering::Relaxed) >= 10, "RViz markers arrive");
     assert!(frames.load(Ordering::Relaxed) >= 10, "frame polygons arrive: {}", frames.load(Ordering::Relaxed));
     assert!(updates.load(Ordering::Relaxed) >= 10, "map updates arrive");
