@@ -10,10 +10,10 @@
 use std::time::Instant;
 
 use nalgebra::Isometry3;
-use polymap::bench::spread;
 use polymap::config::MapConfig;
 use polymap::extract::{Grid, Polygon, VertexKind};
 use polymap::map::PolygonMap;
+use polymap::stats::spread;
 use polymap::synth::path::camera_pose;
 use polymap::types::Intrinsics;
 

@@ -74,7 +74,7 @@ fn main() -> anyhow::Result<()> {
     // A small map: what replaying three frames of the bundled stairs makes.
     let mut config = polymap::config::Config::default();
     config.pipeline.backend = polymap::config::Backend::Cpu;
-    let mut map = polymap::replay::initial_map(&config);
+    let mut map = polymap::map::persist::initial_map(&config.map);
     let mut extractor = polymap::extract::Extractor::new(&config.pipeline)?;
     for k in [0, 10, 20] {
         let (frame, stages, _) = extractor.extract(&seq.depth(k)?, &seq.intrinsics)?;

@@ -10,7 +10,6 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::camera::CamOption;
 pub use crate::ros2::{Distro, Encoding, RosName};
 
 /// A configuration problem: which file, which key, why.
@@ -72,6 +71,75 @@ pub struct DepthSourceConfig {
     pub fps: u32,
     /// L515 options; unset = the camera's own value.
     pub options: L515Options,
+}
+
+/// The options polymap sets, each named as librealsense names it (`rs2_option_to_string`,
+/// lower case with underscores), which is also realsense-ros's parameter name
+/// (`depth_module.<name>`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum CamOption {
+    /// The L515's visual preset. First in this order: setting a preset resets the others.
+    VisualPreset,
+    LaserPower,
+    ConfidenceThreshold,
+    PreProcessingSharpening,
+    /// The L515's "Digital Gain" (RS2_OPTION_DIGITAL_GAIN): 0 auto, 1 high, 2 low.
+    DigitalGain,
+    /// The L515's "Receiver Gain": librealsense's name for the avalanche photodiode's gain
+    /// (RS2_OPTION_AVALANCHE_PHOTO_DIODE), not the digital gain.
+    ReceiverGain,
+    MinDistance,
+    EmitterEnabled,
+    GlobalTimeEnabled,
+}
+
+impl CamOption {
+    pub fn name(self) -> &'static str {
+        match self {
+            CamOption::VisualPreset => "visual_preset",
+            CamOption::LaserPower => "laser_power",
+            CamOption::ConfidenceThreshold => "confidence_threshold",
+            CamOption::PreProcessingSharpening => "pre_processing_sharpening",
+            CamOption::DigitalGain => "digital_gain",
+            CamOption::ReceiverGain => "receiver_gain",
+            CamOption::MinDistance => "min_distance",
+            CamOption::EmitterEnabled => "emitter_enabled",
+            CamOption::GlobalTimeEnabled => "global_time_enabled",
+        }
+    }
+
+    /// The L515 options a user may set in `[sources.depth.options]`, in the order they are applied.
+    pub const L515: [CamOption; 7] = [
+        CamOption::VisualPreset,
+        CamOption::LaserPower,
+        CamOption::ConfidenceThreshold,
+        CamOption::PreProcessingSharpening,
+        CamOption::DigitalGain,
+        CamOption::ReceiverGain,
+        CamOption::MinDistance,
+    ];
+
+    /// An L515 option by its librealsense / realsense-ros name.
+    pub fn l515_by_name(name: &str) -> Option<CamOption> {
+        CamOption::L515.into_iter().find(|o| o.name() == name)
+    }
+
+    /// The values an L515 accepts (librealsense 2.54's L500 options; the camera reports its
+    /// own range too, and refuses what is outside it), and what they mean.
+    pub fn l515_range(self) -> (f32, f32, &'static str) {
+        match self {
+            CamOption::VisualPreset => {
+                (0.0, 5.0, "0 custom, 1 default, 2 no ambient light, 3 low ambient light, 4 max range, 5 short range")
+            }
+            CamOption::LaserPower => (0.0, 100.0, "%"),
+            CamOption::ConfidenceThreshold => (0.0, 3.0, ""),
+            CamOption::PreProcessingSharpening => (0.0, 5.0, ""),
+            CamOption::DigitalGain => (0.0, 2.0, "0 auto, 1 high, 2 low"),
+            CamOption::ReceiverGain => (9.0, 18.0, "the APD gain"),
+            CamOption::MinDistance => (0.0, 2000.0, "mm"),
+            CamOption::EmitterEnabled | CamOption::GlobalTimeEnabled => (0.0, 1.0, "0 off, 1 on"),
+        }
+    }
 }
 
 /// The L515 options to set; the others keep the camera's own values. Keys are librealsense's

@@ -29,6 +29,7 @@ pub mod ring;
 pub mod ros2;
 pub mod runtime;
 pub mod sequence;
+pub mod stats;
 pub mod synth;
 pub mod types;
 pub mod viz;

@@ -316,7 +316,7 @@ fn run(cli: Cli) -> Result<()> {
                 config.map.drift_filter = false;
             }
             let s = Sequence::open(&seq)?;
-            let mut map = replay::initial_map(&config);
+            let mut map = polymap::map::persist::initial_map(&config.map);
             let bar = progress(s.len() as u64, "replay");
             replay::replay(&s, &config, &mut map, |_, _| bar.inc(1))?;
             bar.finish_and_clear();

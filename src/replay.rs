@@ -11,46 +11,11 @@ use crate::extract::Extractor;
 use crate::map::{MapUpdate, PolygonMap, persist};
 use crate::sequence::Sequence;
 
-/// A map to start from: the configured snapshot when `map.load_at_start` is set and it
-/// exists, else empty. A corrupt snapshot is moved aside, logged, and the map starts empty.
-pub fn initial_map(config: &Config) -> PolygonMap {
-    let m = &config.map;
-    if !m.load_at_start || m.snapshot_path.as_os_str().is_empty() || !m.snapshot_path.exists() {
-        return PolygonMap::new(m);
-    }
-    match persist::load(&m.snapshot_path, |s| PolygonMap::from_snapshot(m, s)) {
-        Ok(map) => {
-            tracing::info!("map loaded from {}: {} polygons", m.snapshot_path.display(), map.len());
-            map
-        }
-        Err(e) => {
-            tracing::error!("{e}; starting with an empty map");
-            PolygonMap::new(m)
-        }
-    }
-}
-
 /// Saves the map where the config says, if it says.
-pub fn save_snapshot(map: &mut PolygonMap, config: &Config) -> Result<()> {
-    let path = &config.map.snapshot_path;
-    if path.as_os_str().is_empty() {
-        return Ok(());
-    }
-    write_snapshot(&map.snapshot(), path)
-}
-
-/// Writes a snapshot atomically, the error naming the file.
-pub fn write_snapshot(snapshot: &crate::map::MapSnapshot, path: &Path) -> Result<()> {
-    persist::save(snapshot, path).with_context(|| format!("saving the map to {}", path.display()))
-}
-
-/// Removes the temporary files a crashed writer left beside the configured snapshot.
-pub fn remove_stale_snapshot_temps(config: &Config) {
-    let path = &config.map.snapshot_path;
-    if !path.as_os_str().is_empty() {
-        for stale in persist::remove_stale_temps(path) {
-            tracing::info!("removed {}, left by a write that never finished", stale.display());
-        }
+fn save_snapshot(map: &mut PolygonMap, config: &Config) -> Result<()> {
+    match persist::snapshot_path(&config.map) {
+        Some(path) => persist::save_to(&map.snapshot(), path),
+        None => Ok(()),
     }
 }
 

@@ -1,5 +1,5 @@
 //! Planar rings of 3-D vertices (outlines and holes, no closing repeat), for the
-//! extractor's polygons and the map's shapes alike.
+//! extractor's polygons and the map's shapes alike; and rings drawn onto a pixel grid.
 
 use nalgebra::Vector3;
 
@@ -54,4 +54,52 @@ pub fn clip_tagged_ring<T: Copy + PartialEq>(
         }
     }
     (out, out_tags)
+}
+
+/// Even-odd scanline fill of rings (outline and holes) at pixel centres.
+pub fn fill_rings(rings: &[Vec<[f64; 2]>], width: usize, height: usize) -> Vec<bool> {
+    let mut mask = vec![false; width * height];
+    let mut xs = Vec::new();
+    for v in 0..height {
+        let y = v as f64;
+        xs.clear();
+        for ring in rings {
+            for i in 0..ring.len() {
+                let (a, b) = (ring[i], ring[(i + 1) % ring.len()]);
+                // Half-open in y, so a vertex on the scanline is counted once.
+                if (a[1] <= y) != (b[1] <= y) {
+                    xs.push(a[0] + (y - a[1]) / (b[1] - a[1]) * (b[0] - a[0]));
+                }
+            }
+        }
+        xs.sort_by(f64::total_cmp);
+        for pair in xs.chunks_exact(2) {
+            let from = pair[0].ceil().max(0.0) as usize;
+            let to = (pair[1].floor() as i64).min(width as i64 - 1);
+            for u in from as i64..=to {
+                mask[v * width + u as usize] = true;
+            }
+        }
+    }
+    mask
+}
+
+/// Horizontal distance from `q` to a convex ring (0 inside).
+pub fn distance_xy(ring: &[[f64; 3]], q: [f64; 2]) -> f64 {
+    let n = ring.len();
+    let mut inside = n >= 3;
+    let mut nearest = f64::INFINITY;
+    let area: f64 = (0..n).map(|i| ring[i][0] * ring[(i + 1) % n][1] - ring[(i + 1) % n][0] * ring[i][1]).sum();
+    for i in 0..n {
+        let (a, b) = (ring[i], ring[(i + 1) % n]);
+        let cross = (b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0]);
+        if cross * area.signum() < 0.0 {
+            inside = false;
+        }
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let len2 = (dx * dx + dy * dy).max(1e-300);
+        let t = (((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / len2).clamp(0.0, 1.0);
+        nearest = nearest.min((a[0] + t * dx - q[0]).hypot(a[1] + t * dy - q[1]));
+    }
+    if inside { 0.0 } else { nearest }
 }

@@ -536,8 +536,8 @@ fn at_an_inner_corner_each_region_takes_back_only_its_own_surface() {
 
 #[test]
 fn outlines_cover_their_pixels_squares_and_holes_shrink() {
-    use polymap::eval::fill_rings;
     use polymap::extract::contours::offset_ring;
+    use polymap::ring::fill_rings;
     // A 10 x 6 block of pixels has its centres' outline from (2,3) to (11,8).
     let centres = vec![[2.0, 3.0], [11.0, 3.0], [11.0, 8.0], [2.0, 8.0]];
     let outer = offset_ring(&centres, 0.5);

@@ -193,7 +193,7 @@ fn a_degenerate_polygon_in_a_snapshot_is_refused_as_corrupt_within_a_second() {
     let bowtie = vec![[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
     std::fs::write(&path, serde_json::to_vec(&snapshot_with(bowtie)).unwrap()).unwrap();
     let started = Instant::now();
-    let map = polymap::replay::initial_map(&config);
+    let map = polymap::map::persist::initial_map(&config.map);
     assert!(started.elapsed() < Duration::from_secs(1), "took {:?}", started.elapsed());
     assert!(map.is_empty(), "the corrupt map is not loaded");
     let aside: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
@@ -203,7 +203,7 @@ fn a_degenerate_polygon_in_a_snapshot_is_refused_as_corrupt_within_a_second() {
     let sliver = vec![[0.0, 0.0, 0.0], [2e5, 0.0, 0.0], [2e5, 1e-5, 0.0], [0.0, 1e-5, 0.0]];
     std::fs::write(&path, serde_json::to_vec(&snapshot_with(sliver)).unwrap()).unwrap();
     let started = Instant::now();
-    let map = polymap::replay::initial_map(&config);
+    let map = polymap::map::persist::initial_map(&config.map);
     assert!(started.elapsed() < Duration::from_secs(1), "took {:?}", started.elapsed());
     assert_eq!(map.len(), 1);
 }
@@ -372,7 +372,7 @@ fn every_numeric_config_key_given_absurd_values_is_refused_or_handled() {
                 Ok(mut c) => {
                     // Handled: the parts that use it run with it.
                     c.pipeline.backend = polymap::config::Backend::Cpu;
-                    let mut map = polymap::replay::initial_map(&c);
+                    let mut map = polymap::map::persist::initial_map(&c.map);
                     polymap::replay::replay(&seq, &c, &mut map, |_, _| {})
                         .unwrap_or_else(|e| panic!("{key} = {value}: {e}"));
                     let mut poses =

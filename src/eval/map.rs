@@ -9,8 +9,9 @@
 use nalgebra::{Isometry3, Point3};
 use serde::Serialize;
 
-use super::{fill_rings, mean_std, min_visible_pixels, treads};
+use super::{mean_std, min_visible_pixels, treads};
 use crate::map::MapSnapshot;
+use crate::ring::fill_rings;
 use crate::sequence::{Sequence, SequenceError};
 
 /// Grid cell for map IOU, m.

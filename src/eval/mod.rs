@@ -10,7 +10,7 @@
 pub mod map;
 pub mod segmentation;
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::Isometry3;
 use serde::Serialize;
 
 use crate::extract::Polygon;
@@ -118,7 +118,7 @@ pub(crate) fn treads(truth: &Truth) -> impl Iterator<Item = (u16, &crate::sequen
 }
 
 fn polygon_masks(polygons: &[Polygon], intr: &Intrinsics) -> Vec<Vec<bool>> {
-    polygons.iter().map(|p| polygon_mask(p, intr)).collect()
+    polygons.iter().map(|p| p.image_mask(intr)).collect()
 }
 
 /// The polygon that overlaps the pixels of `label` best, and its IOU ((0, 0.0) for none).
@@ -139,48 +139,6 @@ fn iou(mask: &[bool], labels: &[u16], label: u16) -> f64 {
         union += (m || t) as usize;
     }
     if union == 0 { 0.0 } else { inter as f64 / union as f64 }
-}
-
-/// Pixels whose centre lies inside the polygon (outline minus holes) projected into the image.
-pub fn polygon_mask(p: &Polygon, intr: &Intrinsics) -> Vec<bool> {
-    let project = |ring: &Vec<[f64; 3]>| -> Vec<[f64; 2]> {
-        ring.iter()
-            .map(|v| {
-                let (u, v) = intr.project(&Point3::from(*v));
-                [u, v]
-            })
-            .collect()
-    };
-    let rings: Vec<Vec<[f64; 2]>> = std::iter::once(&p.boundary).chain(&p.holes).map(project).collect();
-    fill_rings(&rings, intr.width as usize, intr.height as usize)
-}
-
-/// Even-odd scanline fill of rings (outline and holes) at pixel centres.
-pub fn fill_rings(rings: &[Vec<[f64; 2]>], width: usize, height: usize) -> Vec<bool> {
-    let mut mask = vec![false; width * height];
-    let mut xs = Vec::new();
-    for v in 0..height {
-        let y = v as f64;
-        xs.clear();
-        for ring in rings {
-            for i in 0..ring.len() {
-                let (a, b) = (ring[i], ring[(i + 1) % ring.len()]);
-                // Half-open in y, so a vertex on the scanline is counted once.
-                if (a[1] <= y) != (b[1] <= y) {
-                    xs.push(a[0] + (y - a[1]) / (b[1] - a[1]) * (b[0] - a[0]));
-                }
-            }
-        }
-        xs.sort_by(f64::total_cmp);
-        for pair in xs.chunks_exact(2) {
-            let from = pair[0].ceil().max(0.0) as usize;
-            let to = (pair[1].floor() as i64).min(width as i64 - 1);
-            for u in from as i64..=to {
-                mask[v * width + u as usize] = true;
-            }
-        }
-    }
-    mask
 }
 
 /// Step-height errors |(z_k - z_{k-1}) - rise| between consecutive treads found in the same frame, m.

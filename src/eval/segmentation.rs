@@ -96,7 +96,7 @@ pub fn polygon_regions(polygons: &[Polygon], frame: &DepthFrame, intr: &Intrinsi
     let mut nearest = vec![f64::INFINITY; regions.len()];
     for (k, p) in polygons.iter().enumerate() {
         let n = Vector3::from(p.normal);
-        for (i, inside) in super::polygon_mask(p, intr).into_iter().enumerate() {
+        for (i, inside) in p.image_mask(intr).into_iter().enumerate() {
             let Some(depth) = inside.then(|| frame.depth_m((i % width) as u32, (i / width) as u32)).flatten() else {
                 continue;
             };

@@ -52,7 +52,7 @@ pub fn polygon_image(depth: &RgbImage, polygons: &[Polygon], intr: &Intrinsics) 
         let colour = viz::label_colour(p.id + 1);
         let ring: Vec<(f32, f32)> = p.boundary.iter().map(pixel).collect();
         // Filled the way eval scores it: pixel centres inside the outline and outside the holes.
-        let inside = crate::eval::polygon_mask(p, intr);
+        let inside = p.image_mask(intr);
         for (a, _) in img.pixels_mut().zip(&inside).filter(|(_, inside)| **inside) {
             for c in 0..3 {
                 a.0[c] = ((a.0[c] as u16 + colour.0[c] as u16) / 2) as u8;

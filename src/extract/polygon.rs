@@ -55,6 +55,20 @@ pub struct Polygon {
 }
 
 impl Polygon {
+    /// Pixels whose centre lies inside the polygon (outline minus holes) projected into the image.
+    pub fn image_mask(&self, intr: &Intrinsics) -> Vec<bool> {
+        let project = |ring: &Vec<[f64; 3]>| -> Vec<[f64; 2]> {
+            ring.iter()
+                .map(|v| {
+                    let (u, v) = intr.project(&Point3::from(*v));
+                    [u, v]
+                })
+                .collect()
+        };
+        let rings: Vec<Vec<[f64; 2]>> = std::iter::once(&self.boundary).chain(&self.holes).map(project).collect();
+        crate::ring::fill_rings(&rings, intr.width as usize, intr.height as usize)
+    }
+
     /// The same polygon in another frame: `t` maps this polygon's frame into it.
     pub fn transformed(&self, t: &Isometry3<f64>) -> Polygon {
         let p = |v: &[f64; 3]| {

@@ -184,26 +184,6 @@ pub fn foothold(f: &crate::map::foothold::Foothold, stamp_ns: StampNs, frame_id:
     }
 }
 
-pub fn status(r: &crate::runtime::status::Report, stamp_ns: StampNs, frame_id: &str) -> msg::Status {
-    msg::Status {
-        header: header(stamp_ns, frame_id),
-        frames_in: r.frames_in,
-        frames_processed: r.processed,
-        frames_dropped: r.dropped,
-        frames_without_pose: r.without_pose,
-        frames_not_extracted: r.extraction_failed,
-        latency_median_ms: r.latency.median,
-        latency_p99_ms: r.latency.p99,
-        poses_accepted: r.poses.accepted,
-        poses_refused: r.poses.rejected + r.poses.undecodable,
-        odometry_restarts: r.poses.restarts,
-        requests_refused: r.requests_refused,
-        snapshots_failed: r.snapshots_failed,
-        drift_z: r.drift_z,
-        map_polygons: r.map_polygons.min(u32::MAX as usize) as u32,
-    }
-}
-
 // RViz markers.
 
 pub const MARKER_LINE_STRIP: i32 = 4;

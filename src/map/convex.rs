@@ -100,7 +100,7 @@ pub fn convex_region_around(shape: &Shape<f64>, at: Coord<f64>) -> Option<Vec<Co
     let (points, triangles) = triangulate(shape);
     let distance = |t: &[usize]| {
         let ring: Vec<[f64; 3]> = t.iter().map(|&i| [points[i].x, points[i].y, 0.0]).collect();
-        super::foothold::distance_xy(&ring, [at.x, at.y])
+        crate::ring::distance_xy(&ring, [at.x, at.y])
     };
     let start = (0..triangles.len()).min_by(|&a, &b| distance(&triangles[a]).total_cmp(&distance(&triangles[b])))?;
     // Cutting needs a point inside: `at`, or the middle of the triangle nearest it.

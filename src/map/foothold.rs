@@ -47,23 +47,3 @@ pub fn foothold(s: &MapSnapshot, p: [f64; 3]) -> Foothold<'_> {
     let piece = region.into_iter().map(|c| [c.x, c.y, polygon.height_at(c.x, c.y)]).collect();
     Some(Found { polygon, piece, distance })
 }
-
-/// Horizontal distance from `q` to a convex ring (0 inside).
-pub fn distance_xy(ring: &[[f64; 3]], q: [f64; 2]) -> f64 {
-    let n = ring.len();
-    let mut inside = n >= 3;
-    let mut nearest = f64::INFINITY;
-    let area: f64 = (0..n).map(|i| ring[i][0] * ring[(i + 1) % n][1] - ring[(i + 1) % n][0] * ring[i][1]).sum();
-    for i in 0..n {
-        let (a, b) = (ring[i], ring[(i + 1) % n]);
-        let cross = (b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0]);
-        if cross * area.signum() < 0.0 {
-            inside = false;
-        }
-        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-        let len2 = (dx * dx + dy * dy).max(1e-300);
-        let t = (((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / len2).clamp(0.0, 1.0);
-        nearest = nearest.min((a[0] + t * dx - q[0]).hypot(a[1] + t * dy - q[1]));
-    }
-    if inside { 0.0 } else { nearest }
-}

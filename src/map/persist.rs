@@ -6,7 +6,44 @@ use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use super::MapSnapshot;
+use super::{MapSnapshot, PolygonMap};
+use crate::config::MapConfig;
+
+/// Where the config saves the map; None: nowhere (`map.snapshot_path = ""`).
+pub fn snapshot_path(cfg: &MapConfig) -> Option<&Path> {
+    Some(cfg.snapshot_path.as_path()).filter(|p| !p.as_os_str().is_empty())
+}
+
+/// The map to start from: the configured snapshot when `map.load_at_start` is set and it
+/// exists, else empty. A corrupt snapshot is moved aside, logged, and the map starts empty.
+pub fn initial_map(cfg: &MapConfig) -> PolygonMap {
+    let Some(path) = snapshot_path(cfg).filter(|p| cfg.load_at_start && p.exists()) else {
+        return PolygonMap::new(cfg);
+    };
+    match load(path, |s| PolygonMap::from_snapshot(cfg, s)) {
+        Ok(map) => {
+            tracing::info!("map loaded from {}: {} polygons", path.display(), map.len());
+            map
+        }
+        Err(e) => {
+            tracing::error!("{e}; starting with an empty map");
+            PolygonMap::new(cfg)
+        }
+    }
+}
+
+/// [`save`], the error naming the file.
+pub fn save_to(snapshot: &MapSnapshot, path: &Path) -> anyhow::Result<()> {
+    use anyhow::Context;
+    save(snapshot, path).with_context(|| format!("saving the map to {}", path.display()))
+}
+
+/// Removes the temporary files a crashed writer left beside the configured snapshot.
+pub fn remove_stale_configured(cfg: &MapConfig) {
+    for stale in snapshot_path(cfg).map(remove_stale_temps).unwrap_or_default() {
+        tracing::info!("removed {}, left by a write that never finished", stale.display());
+    }
+}
 
 /// Writes `snapshot` to `path` atomically. A write that fails (a full disk, a read-only
 /// directory) leaves no temporary file behind and the previous snapshot as it was.

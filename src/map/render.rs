@@ -4,7 +4,7 @@
 use image::{Rgb, RgbImage};
 
 use super::{Label, MapSnapshot};
-use crate::eval::fill_rings;
+use crate::ring::fill_rings;
 use crate::sequence::Truth;
 use crate::viz::draw_ring;
 

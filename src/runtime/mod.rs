@@ -51,14 +51,14 @@ use worker::{FrameEvent, WorkerEnd};
 /// counts of the whole run, its latency over every frame published.
 pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::Report> {
     let seq = sources::mock_sequence(config)?;
-    crate::replay::remove_stale_snapshot_temps(config);
+    crate::map::persist::remove_stale_configured(&config.map);
     let session = crate::ros2::session::open(crate::ros2::session::config(&config.zenoh.config_file)?).await?;
     let node = Arc::new(Node::new(&session, config.ros2.node_options()).await?);
     let interface = Interface::new(config);
     let poses =
         Arc::new(Mutex::new(PoseBuffer::with_limits(4096, crate::pose::PoseLimits::from_config(&config.poses))));
     let _odometry = odometry::subscribe(&node, &interface, poses.clone()).await?;
-    let map = Arc::new(Mutex::new(crate::replay::initial_map(config)));
+    let map = Arc::new(Mutex::new(crate::map::persist::initial_map(&config.map)));
     let counters = Arc::new(Counters::default());
     let stop = Arc::new(AtomicBool::new(false));
     let slot = Arc::new(slot::Slot::default());
@@ -109,7 +109,7 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
             let m = map.lock();
             (m.drift.z, m.len())
         };
-        counters.report(crate::bench::spread(latencies), p, drift_z, len)
+        counters.report(crate::stats::spread(latencies), p, drift_z, len)
     };
     // The worker's events channel closes when the thread ends, by a stop or a panic.
     let worker_ended = loop {
@@ -180,10 +180,9 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
 
 /// The map snapshotted under its lock, written (slow on a full or failing disk) off it.
 async fn save_snapshot(map: &Arc<Mutex<PolygonMap>>, config: &Config) -> Result<()> {
-    if config.map.snapshot_path.as_os_str().is_empty() {
+    let Some(path) = crate::map::persist::snapshot_path(&config.map).map(|p| p.to_path_buf()) else {
         return Ok(());
-    }
+    };
     let snapshot = map.lock().snapshot();
-    let path = config.map.snapshot_path.clone();
-    tokio::task::spawn_blocking(move || crate::replay::write_snapshot(&snapshot, &path)).await?
+    tokio::task::spawn_blocking(move || crate::map::persist::save_to(&snapshot, &path)).await?
 }

@@ -101,6 +101,6 @@ impl Publishers {
     }
 
     pub async fn status(&self, report: &Report) -> Result<(), Ros2Error> {
-        self.status.put(&convert::status(report, crate::clock::now_ns(), &self.map_frame)).await
+        self.status.put(&report.message(crate::clock::now_ns(), &self.map_frame)).await
     }
 }

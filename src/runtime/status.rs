@@ -5,6 +5,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::awaiting::Skip;
 use crate::pose::PoseCounters;
+use crate::types::StampNs;
 
 /// Counts shared by the tasks.
 #[derive(Default)]
@@ -36,7 +37,7 @@ pub struct Report {
     pub extraction_failed: u64,
     pub requests_refused: u64,
     pub snapshots_failed: u64,
-    pub latency: crate::bench::Spread,
+    pub latency: crate::stats::Spread,
     pub poses: PoseCounters,
     pub drift_z: f64,
     pub map_polygons: usize,
@@ -50,7 +51,7 @@ impl Counters {
     /// The counts now, with what the caller knows of the rest.
     pub fn report(
         &self,
-        latency: crate::bench::Spread,
+        latency: crate::stats::Spread,
         poses: PoseCounters,
         drift_z: f64,
         map_polygons: usize,
@@ -74,6 +75,29 @@ impl Counters {
             poses,
             drift_z,
             map_polygons,
+        }
+    }
+}
+
+impl Report {
+    /// As polymap_msgs/Status.
+    pub fn message(&self, stamp_ns: StampNs, frame_id: &str) -> crate::ros2::msg::Status {
+        crate::ros2::msg::Status {
+            header: crate::interface::convert::header(stamp_ns, frame_id),
+            frames_in: self.frames_in,
+            frames_processed: self.processed,
+            frames_dropped: self.dropped,
+            frames_without_pose: self.without_pose,
+            frames_not_extracted: self.extraction_failed,
+            latency_median_ms: self.latency.median,
+            latency_p99_ms: self.latency.p99,
+            poses_accepted: self.poses.accepted,
+            poses_refused: self.poses.rejected + self.poses.undecodable,
+            odometry_restarts: self.poses.restarts,
+            requests_refused: self.requests_refused,
+            snapshots_failed: self.snapshots_failed,
+            drift_z: self.drift_z,
+            map_polygons: self.map_polygons.min(u32::MAX as usize) as u32,
         }
     }
 }
