@@ -1,6 +1,7 @@
-//! The looped sequence's clock the mocks share: at UNIX time t a mock is at sequence time
-//! `first + t mod period`, so the mock camera, the mock D435i and the mock VINS, in separate
-//! processes that never talk to each other, agree on which frame goes with which pose.
+//! The looped sequence's clock the mocks share: at UNIX time t a mock is at the sequence time
+//! that `t mod period` shows on a loop that walks the sequence forward and then back, so the
+//! mock camera, the mock D435i and the mock VINS, in separate processes that never talk to
+//! each other, agree on which frame goes with which pose.
 
 use anyhow::{Result, bail};
 

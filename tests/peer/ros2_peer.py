@@ -146,12 +146,17 @@ def run(peer, args):
     for name, typename in TOPICS.items():
         peer.subscribe(name, typename, taker(name))
 
-    # VINS: the sequence's poses on the mock camera's looped clock (mock/clock.rs's rule:
-    # at wall time t the loop shows sequence time first + t mod period, period one frame
-    # interval past the last frame).
+    # VINS: the sequence's poses on the mock camera's looped clock (mock/clock.rs's rule: the
+    # loop walks the sequence forward and then back, so its period is twice the walk; frame
+    # k is shown at offset stamp_k - first on the way out and 2 * span - (stamp_k - first) on
+    # the way back, the last and first frames once each).
     poses = read_poses(args.sequence)
     first, last = poses[0][0], poses[-1][0]
-    period = last - first + (last - first) // (len(poses) - 1)
+    span = last - first
+    period = 2 * span
+    shown_at = [(stamp - first, p, q) for stamp, p, q in poses]
+    shown_at += [(period - (stamp - first), p, q) for stamp, p, q in poses[1:-1]]
+    shown_at.sort(key=lambda shown: shown[0])
     put = peer.publisher("/odometry", "nav_msgs/msg/Odometry", qos="::,100:,:,:,,")
     Odometry = peer.msg("nav_msgs/msg/Odometry")
     m = peer.store.types
@@ -181,8 +186,8 @@ def run(peer, args):
         loop_start = now - now % period
         # Every frame the loop has shown in the last 100 ms, stamped as the camera stamps it.
         for base in (loop_start - period, loop_start):
-            for stamp, p, q in poses:
-                shown = base + (stamp - first)
+            for offset, p, q in shown_at:
+                shown = base + offset
                 if now - 100_000_000 <= shown <= now and shown not in sent:
                     put(odometry(shown, p, q))
                     sent.add(shown)
