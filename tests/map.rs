@@ -9,7 +9,7 @@ use polymap::extract::{Grid, Polygon, VertexKind};
 use polymap::map::convex::convex_pieces;
 use polymap::map::drift::DriftFilter;
 use polymap::map::geometry::top_down;
-use polymap::map::{Label, MapSnapshot, PolygonMap, persist};
+use polymap::map::{Label, MapSnapshot, PolygonMap, PolygonProblem, Rejection, SnapshotProblem, persist};
 use polymap::types::Intrinsics;
 use proptest::prelude::*;
 
@@ -275,7 +275,15 @@ fn a_polygon_whose_vertex_kinds_do_not_match_its_vertices_is_refused_with_why() 
     let update = map.update(&[p], &pose, &intr, None);
     assert!(map.is_empty());
     assert_eq!(update.rejected.len(), 1);
-    assert!(update.rejected[0].contains("3 kinds for the outline's 4 vertices"), "{:?}", update.rejected);
+    assert!(
+        matches!(
+            update.rejected[0],
+            Rejection::Polygon { problem: PolygonProblem::KindsMismatch { outline_kinds: 3, outline: 4, .. }, .. }
+        ),
+        "{:?}",
+        update.rejected
+    );
+    assert!(update.rejected[0].to_string().contains("3 kinds for the outline's 4 vertices"), "{:?}", update.rejected);
     assert_eq!(map.counters.rejected, 1);
 }
 
@@ -534,15 +542,30 @@ fn bad_polygons_and_poses_are_refused_and_counted() {
     two.boundary.truncate(2);
     let update = map.update(&[nan, not_unit, two, good.clone()], &pose, &intr, None);
     assert_eq!(update.rejected.len(), 3, "{:?}", update.rejected);
-    assert!(update.rejected[0].contains("not finite"), "{}", update.rejected[0]);
-    assert!(update.rejected[1].contains("unit"), "{}", update.rejected[1]);
-    assert!(update.rejected[2].contains("3"), "{}", update.rejected[2]);
+    let problems: Vec<&PolygonProblem> = update
+        .rejected
+        .iter()
+        .map(|r| match r {
+            Rejection::Polygon { problem, .. } => problem,
+            other => panic!("a polygon's problem, not {other}"),
+        })
+        .collect();
+    assert!(
+        matches!(
+            problems[..],
+            [PolygonProblem::VertexOutOfReach, PolygonProblem::NormalNotUnit(_), PolygonProblem::TooFewVertices(2)]
+        ),
+        "{problems:?}"
+    );
+    assert!(update.rejected[0].to_string().contains("not finite"), "{}", update.rejected[0]);
+    assert!(update.rejected[1].to_string().contains("unit"), "{}", update.rejected[1]);
+    assert!(update.rejected[2].to_string().contains("3"), "{}", update.rejected[2]);
     assert_eq!(map.len(), 1);
     let mut bad_pose = pose;
     bad_pose.translation.x = f64::INFINITY;
     let before = map.snapshot();
     let update = map.update(&[good], &bad_pose, &intr, None);
-    assert!(update.rejected.iter().any(|r| r.contains("pose")));
+    assert!(update.rejected.iter().any(|r| matches!(r, Rejection::Pose { .. }) && r.to_string().contains("pose")));
     assert_eq!(map.snapshot(), before, "a bad pose leaves the map as it was");
     assert_eq!(map.counters.rejected, 4);
 }
@@ -559,7 +582,9 @@ fn snapshots_round_trip_and_corrupt_files_are_moved_aside() {
     let path = dir.path().join("map.json");
     let snap = map.snapshot();
     persist::save(&snap, &path).unwrap();
-    let loaded = persist::load(&path, |s| PolygonMap::from_snapshot(&cfg, s).map(|_| s.clone())).unwrap();
+    let loaded =
+        persist::load(&path, |s| PolygonMap::from_snapshot(&cfg, s).map(|_| s.clone()).map_err(|e| e.to_string()))
+            .unwrap();
     assert_eq!(loaded, snap);
     let mut reloaded = PolygonMap::from_snapshot(&cfg, &loaded).unwrap();
     let again = reloaded.snapshot();
@@ -576,7 +601,15 @@ fn snapshots_round_trip_and_corrupt_files_are_moved_aside() {
 
     let mut bad: MapSnapshot = snap.clone();
     bad.polygons[0].normal = [0.0, 0.0, 0.0];
-    assert!(PolygonMap::from_snapshot(&cfg, &bad).err().expect("a zero normal is refused").contains("normal"));
+    let refused = PolygonMap::from_snapshot(&cfg, &bad).err().expect("a zero normal is refused");
+    assert!(
+        matches!(
+            refused,
+            SnapshotProblem::Polygon(Rejection::Polygon { problem: PolygonProblem::NormalNotUnit(_), .. })
+        ),
+        "{refused}"
+    );
+    assert!(refused.to_string().contains("normal"), "{refused}");
 }
 
 fn ring_area(r: &[[f64; 3]]) -> f64 {

@@ -17,6 +17,7 @@ pub mod geometry;
 pub mod labels;
 pub mod persist;
 pub mod render;
+pub mod validate;
 
 use std::collections::BTreeMap;
 
@@ -33,6 +34,7 @@ use crate::types::Intrinsics;
 use drift::DriftFilter;
 use geometry::{Moments, Plane, PlaneFrame, ViewPyramid};
 pub use labels::{Label, Stair};
+pub use validate::{PolygonProblem, Rejection, SnapshotProblem, polygon_problem};
 
 /// One map polygon as planners get it (world frame, metres).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -109,8 +111,8 @@ pub struct MapUpdate {
     pub removed: Vec<u64>,
     /// The drift this frame measured (before filtering), m.
     pub drift_measured: Option<f64>,
-    /// Polygons refused, each with why.
-    pub rejected: Vec<String>,
+    /// What was refused, each with why.
+    pub rejected: Vec<Rejection>,
 }
 
 /// Running totals, for status and logs.
@@ -218,8 +220,6 @@ const MIN_CLEAR_SAMPLES: usize = 8;
 const CLEAR_SAMPLES: f64 = 48.0;
 /// The most grid points across a shape's box that clearing samples are taken from.
 const MAX_SAMPLE_GRID: f64 = 64.0;
-/// A polygon smaller than this is no surface (a degenerate outline), m^2.
-const MIN_POLYGON_AREA_M2: f64 = 1e-6;
 /// Samples seen at a grazing angle (ray within ~9 deg of the plane) are not judged.
 const MIN_VIEW_COS: f64 = 0.15;
 /// Something over a surface's footprint nearer to it than this stands in its place, m.
@@ -300,8 +300,8 @@ impl PolygonMap {
         let valid: Vec<&Polygon> = polygons
             .iter()
             .filter(|p| match polygon_problem(p) {
-                Some(why) => {
-                    update.rejected.push(format!("polygon {}: {why}", p.id));
+                Some(problem) => {
+                    update.rejected.push(Rejection::Polygon { id: p.id as u64, problem });
                     false
                 }
                 None => true,
@@ -311,11 +311,9 @@ impl PolygonMap {
         let pose_finite = t.iter().chain(t_world_camera.rotation.coords.iter()).all(|v| v.is_finite())
             && t.norm() <= crate::types::MAX_COORDINATE_M;
         if !pose_finite {
-            update.rejected.push(format!(
-                "pose at {:?} is not finite or beyond {} m: frame skipped",
-                t.as_slice(),
-                crate::types::MAX_COORDINATE_M
-            ));
+            update
+                .rejected
+                .push(Rejection::Pose { translation: [t.x, t.y, t.z], max_m: crate::types::MAX_COORDINATE_M });
         }
         self.counters.rejected += update.rejected.len() as u64;
         for why in &update.rejected {
@@ -678,12 +676,12 @@ impl PolygonMap {
 
     /// A map rebuilt from a snapshot: each polygon's moments are its surface's, weighted by
     /// its observations, so later frames refine it as if it had been seen all along.
-    pub fn from_snapshot(cfg: &MapConfig, s: &MapSnapshot) -> Result<PolygonMap, String> {
+    pub fn from_snapshot(cfg: &MapConfig, s: &MapSnapshot) -> Result<PolygonMap, SnapshotProblem> {
         if s.frame != "world" {
-            return Err(format!("frame is {:?}, a map is in \"world\"", s.frame));
+            return Err(SnapshotProblem::Frame(s.frame.clone()));
         }
         if !(s.drift_z.is_finite() && s.drift_var.is_finite() && s.drift_var >= 0.0) {
-            return Err(format!("drift_z {} / drift_var {} must be finite, the variance >= 0", s.drift_z, s.drift_var));
+            return Err(SnapshotProblem::Drift { z: s.drift_z, var: s.drift_var });
         }
         let mut map = PolygonMap::new(cfg);
         map.drift.z = s.drift_z;
@@ -691,7 +689,7 @@ impl PolygonMap {
         let mut ids: Vec<u64> = s.polygons.iter().map(|p| p.id).collect();
         ids.sort_unstable();
         if let Some(w) = ids.windows(2).find(|w| w[0] == w[1]) {
-            return Err(format!("polygon id {} appears twice", w[0]));
+            return Err(SnapshotProblem::DuplicateId(w[0]));
         }
         for p in &s.polygons {
             let normal = Vector3::from(p.normal);
@@ -709,8 +707,8 @@ impl PolygonMap {
                 rms: 0.0,
                 uncertainty: Default::default(),
             };
-            if let Some(why) = polygon_problem(&as_frame_polygon) {
-                return Err(format!("polygon {}: {why}", p.id));
+            if let Some(problem) = polygon_problem(&as_frame_polygon) {
+                return Err(SnapshotProblem::Polygon(Rejection::Polygon { id: p.id, problem }));
             }
             let surface = Moments::of_polygon(&p.boundary, &p.holes, &normal);
             let uncertainty = snapshot_uncertainty(p);
@@ -812,45 +810,6 @@ const MAX_ERODE_M: f64 = 0.05;
 fn footprint(v: &[f64; 3], p: &Polygon, intrinsics: &Intrinsics) -> f64 {
     let v = Vector3::from(*v);
     v.norm_squared() / (intrinsics.fx * Vector3::from(p.normal).dot(&v).abs().max(1e-6))
-}
-
-/// Why a frame polygon cannot go into the map, if it cannot.
-pub fn polygon_problem(p: &Polygon) -> Option<String> {
-    let n = Vector3::from(p.normal);
-    if !n.iter().all(|v| v.is_finite()) || (n.norm() - 1.0).abs() > 1e-3 {
-        return Some(format!("normal {:?} is not a unit vector", p.normal));
-    }
-    if !p.offset.is_finite() {
-        return Some(format!("offset {} is not finite", p.offset));
-    }
-    if p.boundary.len() < 3 {
-        return Some(format!("outline has {} vertices, at least 3 needed", p.boundary.len()));
-    }
-    let all = p.boundary.iter().chain(p.holes.iter().flatten());
-    if all.clone().any(|v| !v.iter().all(|c| c.is_finite() && c.abs() < crate::types::MAX_COORDINATE_M)) {
-        return Some(format!("a vertex is not finite (or beyond {} m)", crate::types::MAX_COORDINATE_M));
-    }
-    if p.holes.iter().any(|h| h.len() < 3) {
-        return Some("a hole has under 3 vertices".into());
-    }
-    if p.boundary_kinds.len() != p.boundary.len()
-        || p.hole_kinds.len() != p.holes.len()
-        || p.holes.iter().zip(&p.hole_kinds).any(|(h, k)| h.len() != k.len())
-    {
-        return Some(format!(
-            "vertex kinds do not match the vertices ({} kinds for the outline's {} vertices, {} rings of kinds for {} holes)",
-            p.boundary_kinds.len(),
-            p.boundary.len(),
-            p.hole_kinds.len(),
-            p.holes.len()
-        ));
-    }
-    // A degenerate outline (a line, a bowtie whose lobes cancel) has no plane frame to hold it.
-    let area = Moments::of_polygon(&p.boundary, &p.holes, &n).weight;
-    if !(area >= MIN_POLYGON_AREA_M2) {
-        return Some(format!("its outline encloses {area:.3e} m^2: no surface"));
-    }
-    None
 }
 
 /// Adds observations' moments to an entry, refits its plane and refreshes what follows.

@@ -20,7 +20,7 @@ pub fn initial_map(cfg: &MapConfig) -> PolygonMap {
     let Some(path) = snapshot_path(cfg).filter(|p| cfg.load_at_start && p.exists()) else {
         return PolygonMap::new(cfg);
     };
-    match load(path, |s| PolygonMap::from_snapshot(cfg, s)) {
+    match load(path, |s| PolygonMap::from_snapshot(cfg, s).map_err(|e| e.to_string())) {
         Ok(map) => {
             tracing::info!("map loaded from {}: {} polygons", path.display(), map.len());
             map
