@@ -191,7 +191,7 @@ impl PoseTiming {
     pub fn new(opts: &MockVinsOptions, start_ns: StampNs) -> PoseTiming {
         use rand::SeedableRng;
         PoseTiming {
-            // The first stamp one latency after the start, so no stamp precedes the start.
+            // The first stamp one jitter after the start, so no stamp precedes the start.
             start_ns: start_ns + (opts.jitter_ms * 1e6) as StampNs,
             period_ns: 1e9 / opts.rate_hz,
             latency_ns: opts.latency_ms * 1e6,
