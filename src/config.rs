@@ -31,6 +31,7 @@ pub struct Config {
     pub poses: PosesConfig,
     pub zenoh: ZenohConfig,
     pub ros2: Ros2Config,
+    pub ros1: Ros1Config,
     pub planar_terrain: PlanarTerrainConfig,
 }
 
@@ -539,6 +540,54 @@ impl Default for Ros2Config {
     }
 }
 
+/// ROS 1 (Noetic), beside ROS 2: the robot's own rosmaster, its VINS-Fusion and planners.
+/// The master is the one `ROS_MASTER_URI` names; `ROS_HOSTNAME` or `ROS_IP` say where peers
+/// reach polymap, as for roscpp nodes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Ros1Config {
+    pub enabled: bool,
+    /// The node's name; polymap's own topics and services are under it: `/polymap/map`, ...
+    pub node: RosName,
+    /// VINS-Fusion's odometry, and its IMU-rate propagated odometry (None: not used).
+    pub odometry: RosName,
+    pub odometry_type: OdometryType,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub imu_propagate: Option<RosName>,
+    /// Each frame's polygons as the paper authors' node publishes them (closed LINE_STRIP
+    /// markers, visualization_msgs/MarkerArray), for nodes written for it; None: not sent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub polygon_markers: Option<RosName>,
+    /// Where the D435i's IR images and IMU go, as realsense-ros (ROS 1) names them.
+    pub camera_namespace: RosName,
+    /// Where the transform from the map frame to VINS's goes (the frames are `[ros2]`'s:
+    /// each message is built once for both layers).
+    pub tf_topic: RosName,
+}
+
+impl Default for Ros1Config {
+    fn default() -> Self {
+        let name = |n: &str| RosName::parse(n).expect("a valid name");
+        Ros1Config {
+            enabled: false,
+            node: name("/polymap"),
+            odometry: name("/vins_estimator/odometry"),
+            odometry_type: OdometryType::Odometry,
+            imu_propagate: Some(name("/vins_estimator/imu_propagate")),
+            polygon_markers: Some(name("/polygon_new_markers")),
+            camera_namespace: name("/camera"),
+            tf_topic: name("/tf"),
+        }
+    }
+}
+
+impl Ros1Config {
+    /// The node's fully qualified name.
+    pub fn node_name(&self) -> String {
+        self.node.to_string()
+    }
+}
+
 /// The map as convex_plane_decomposition_msgs/PlanarTerrain, for legged planners that read it
 /// (OCS2's perceptive locomotion, elevation_mapping_cupy's plane segmentation consumers).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -735,6 +784,9 @@ impl Config {
                 "ros2.map_frame".into(),
                 format!("{:?} is the odometry's frame too: the drift needs two", r.map_frame),
             ));
+        }
+        if self.ros1.node.as_str() == "/" {
+            return Err(("ros1.node".into(), "\"/\" is a namespace, not a node name (e.g. \"/polymap\")".into()));
         }
         check_range("ros2.whole_map_period_s", r.whole_map_period_s, 0.01, 3600.0)?;
         let t = &self.planar_terrain;

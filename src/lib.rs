@@ -26,6 +26,7 @@ pub mod mock;
 pub mod pose;
 pub mod replay;
 pub mod ring;
+pub mod ros1;
 pub mod ros2;
 pub mod runtime;
 pub mod sequence;

@@ -176,9 +176,13 @@ enum Command {
         /// The mock VINS's IMU-rate propagated poses per second (imu_propagate); 0: none
         #[arg(long, default_value_t = MockVinsOptions::ROBOT.propagate_hz)]
         vins_propagate_hz: f64,
+        /// Also on ROS 1: the mapper and the mock VINS register with the rosmaster
+        /// ROS_MASTER_URI names (start one with `roscore`), VINS's poses go over ROS 1
+        #[arg(long)]
+        ros1: bool,
     },
-    /// Publish a sequence's poses as VINS-Fusion's ROS 2 port would: nav_msgs/Odometry on the
-    /// config's odometry topic, the sequence looped on the wall clock
+    /// Publish a sequence's poses as VINS-Fusion would: nav_msgs/Odometry on the config's
+    /// odometry topic (ROS 2's, or ROS 1's with --ros1), the sequence looped on the wall clock
     MockVins {
         seq: PathBuf,
         /// Poses per second (VINS-Fusion on a robot: 10-20)
@@ -199,9 +203,12 @@ enum Command {
         /// Stop after this many seconds (default: run until interrupted)
         #[arg(long)]
         duration: Option<f64>,
-        /// Zenoh and ROS 2 settings ([zenoh], [ros2]) from this config file
+        /// Zenoh and ROS settings ([zenoh], [ros2], [ros1]) from this config file
         #[arg(long)]
         config: Option<PathBuf>,
+        /// Publish on ROS 1 (the rosmaster ROS_MASTER_URI names), as VINS-Fusion's original
+        #[arg(long)]
+        ros1: bool,
     },
     /// A Zenoh router in a process of its own (as rmw_zenohd), with the given Zenoh config
     /// (e.g. config/zenoh/robot/router.json5: mutual TLS and access control)
@@ -374,8 +381,10 @@ fn run(cli: Cli) -> Result<()> {
             vins_latency_ms,
             vins_jitter_ms,
             vins_propagate_hz,
+            ros1,
         } => {
             let mut config = load_config(config, None)?;
+            config.ros1.enabled |= ros1;
             let duration = seconds(duration)?;
             config.map.snapshot_path = out.clone();
             let runtime = tokio::runtime::Runtime::new()?;
@@ -401,8 +410,9 @@ fn run(cli: Cli) -> Result<()> {
                 .with_context(|| format!("writing {}", render.display()))?;
             println!("picture in {}", render.display());
         }
-        Command::MockVins { seq, rate, latency_ms, jitter_ms, propagate_hz, drift, duration, config } => {
-            let config = load_config(config, None)?;
+        Command::MockVins { seq, rate, latency_ms, jitter_ms, propagate_hz, drift, duration, config, ros1 } => {
+            let mut config = load_config(config, None)?;
+            config.ros1.enabled |= ros1;
             let s = Sequence::open(&seq)?;
             let opts = MockVinsOptions {
                 rate_hz: rate,

@@ -141,7 +141,7 @@ fn treads(mut map: PolygonMap) -> Vec<(u32, f64)> {
 
 fn straight_walk() -> (Sequence, Config, Vec<(FramePolygons, Grid<f32>)>) {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let seq = Sequence::open(&root.join("mock_frames/straight_320")).unwrap();
+    let seq = Sequence::open(root.join("mock_frames/straight_320")).unwrap();
     let mut config = Config::default();
     config.pipeline.backend = Backend::Cpu;
     let frames = extracted(&seq, &config);

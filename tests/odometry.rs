@@ -4,6 +4,7 @@
 //! counted and kept out; PoseStamped is understood when configured; the mock VINS, a
 //! separate process, publishes a sequence's poses.
 
+use polymap::runtime::wires::{Held, Wires};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -31,7 +32,7 @@ async fn wait_for_peer(session: &zenoh::Session) {
 
 struct Pair {
     publisher: zenoh::Session,
-    _mapper: (zenoh::Session, Node, Vec<polymap::ros2::Subscription>),
+    _mapper: (zenoh::Session, Wires, Vec<Held>),
     buffer: Arc<Mutex<PoseBuffer>>,
     /// The key rmw_zenoh (Jazzy) puts /odometry's nav_msgs/Odometry on.
     key: String,
@@ -42,10 +43,11 @@ struct Pair {
 async fn pair(config: &Config, capacity: usize) -> Pair {
     let port = free_loopback_port().unwrap();
     let mapper = polymap::ros2::session::open(loopback(Some(port), &[])).await.unwrap();
-    let node = Node::new(&mapper, config.ros2.node_options()).await.unwrap();
+    let node = Arc::new(Node::new(&mapper, config.ros2.node_options()).await.unwrap());
     let buffer = Arc::new(Mutex::new(PoseBuffer::new(capacity, 200 * MS)));
     let interface = Interface::new(config);
-    let subscription = polymap::runtime::odometry::subscribe(&node, &interface, buffer.clone()).await.unwrap();
+    let wires = Wires { ros2: Some(Wires::ros2(config, node.clone())), ros1: None };
+    let subscription = polymap::runtime::odometry::subscribe(&wires, buffer.clone()).await.unwrap();
     let publisher = polymap::ros2::session::open(loopback(None, &[port])).await.unwrap();
     wait_for_peer(&publisher).await;
     wait_for_peer(&mapper).await;
@@ -54,7 +56,7 @@ async fn pair(config: &Config, capacity: usize) -> Pair {
     let hash = types::message_hash::<polymap::ros2::msg::Odometry>();
     let e = Endpoint { name: interface.odometry_name(), type_name: "nav_msgs/msg/Odometry", type_hash: &hash };
     let key = node.data_key(&e);
-    Pair { publisher, _mapper: (mapper, node, subscription), buffer, key }
+    Pair { publisher, _mapper: (mapper, wires, subscription), buffer, key }
 }
 
 impl Pair {
@@ -202,9 +204,10 @@ async fn mock_vins_publishes_the_sequence_poses() {
     let port = free_loopback_port().unwrap();
     let mapper = polymap::ros2::session::open(loopback(Some(port), &[])).await.unwrap();
     let config = Config::default();
-    let node = Node::new(&mapper, config.ros2.node_options()).await.unwrap();
+    let node = Arc::new(Node::new(&mapper, config.ros2.node_options()).await.unwrap());
     let buffer = Arc::new(Mutex::new(PoseBuffer::new(1000, 200 * MS)));
-    let _sub = polymap::runtime::odometry::subscribe(&node, &Interface::new(&config), buffer.clone()).await.unwrap();
+    let wires = Wires { ros2: Some(Wires::ros2(&config, node)), ros1: None };
+    let _sub = polymap::runtime::odometry::subscribe(&wires, buffer.clone()).await.unwrap();
     let zenoh_file = dir.path().join("vins.json5");
     std::fs::write(&zenoh_file, polymap::ros2::session::loopback_json5(None, &[port])).unwrap();
     let vins_config = dir.path().join("vins.toml");

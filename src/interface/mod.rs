@@ -1,5 +1,5 @@
-//! polymap's ROS 2 interface, typed once: every topic and service it offers or takes, with
-//! its name, message type and QoS ([`Interface`]), and the conversions between polymap's own
+//! polymap's ROS interface, typed once: every topic and service it offers or takes, with
+//! its name, message type and QoS ([`Interface`]; ROS 2's names, or ROS 1's), and the conversions between polymap's own
 //! types and those messages ([`convert`]). The runtime, the mocks, the tests and the examples
 //! all take names from here.
 
@@ -58,15 +58,62 @@ pub struct Interface {
     /// The D435i's streams for VINS, under realsense-ros's names (`/camera/camera/...`).
     pub infra: [InfraTopics; 2],
     pub imu: Topic<Imu>,
+    /// ROS 1: each frame's polygons as the paper authors' node sends them
+    /// (`/polygon_new_markers`), when configured.
+    pub polygon_markers: Option<Topic<MarkerArray>>,
+}
+
+/// The names that differ between the ROS 2 and ROS 1 interfaces.
+struct Names<'a> {
+    namespace: &'a RosName,
+    camera: &'a RosName,
+    odometry: &'a RosName,
+    odometry_type: OdometryType,
+    imu_propagate: Option<&'a RosName>,
+    tf: &'a RosName,
+    polygon_markers: Option<&'a RosName>,
 }
 
 impl Interface {
+    /// ROS 2's names.
     pub fn new(config: &Config) -> Interface {
-        let ns = &config.ros2.namespace;
-        let own = |name: &str| ns.join(name).expect("polymap's topic names are valid ROS names");
-        let camera = &config.sources.d435i.namespace;
-        let cam = |name: &str| camera.join(name).expect("realsense-ros's topic names are valid ROS names");
-        let odometry = config.ros2.odometry.clone();
+        let r = &config.ros2;
+        Interface::named(
+            config,
+            Names {
+                namespace: &r.namespace,
+                camera: &config.sources.d435i.namespace,
+                odometry: &r.odometry,
+                odometry_type: r.odometry_type,
+                imu_propagate: r.imu_propagate.as_ref(),
+                tf: &r.tf_topic,
+                polygon_markers: None,
+            },
+        )
+    }
+
+    /// ROS 1's names: polymap's own under its node, VINS-Fusion's and realsense-ros's as
+    /// their ROS 1 versions name them.
+    pub fn ros1(config: &Config) -> Interface {
+        let r = &config.ros1;
+        Interface::named(
+            config,
+            Names {
+                namespace: &r.node,
+                camera: &r.camera_namespace,
+                odometry: &r.odometry,
+                odometry_type: r.odometry_type,
+                imu_propagate: r.imu_propagate.as_ref(),
+                tf: &r.tf_topic,
+                polygon_markers: r.polygon_markers.as_ref(),
+            },
+        )
+    }
+
+    fn named(config: &Config, names: Names) -> Interface {
+        let own = |name: &str| names.namespace.join(name).expect("polymap's topic names are valid ROS names");
+        let cam = |name: &str| names.camera.join(name).expect("realsense-ros's topic names are valid ROS names");
+        let odometry = names.odometry.clone();
         let infra = |i: u8| InfraTopics {
             image: Topic::new(cam(&format!("infra{i}/image_rect_raw")), Qos::reliable(5)),
             camera_info: Topic::new(cam(&format!("infra{i}/camera_info")), Qos::reliable(5)),
@@ -77,20 +124,22 @@ impl Interface {
             map: Topic::new(own("map"), Qos::latched(1)),
             markers: Topic::new(own("markers"), Qos::latched(1)),
             // tf2's listeners subscribe reliable, volatile, keep last 100.
-            tf: Topic::new(config.ros2.tf_topic.clone(), Qos::reliable(100)),
+            tf: Topic::new(names.tf.clone(), Qos::reliable(100)),
             // Its consumers subscribe reliable, keep last 1; transient local serves them and
             // a late one at once.
             planar_terrain: Topic::new(config.planar_terrain.topic.clone(), Qos::latched(1)),
             status: Topic::new(own("status"), Qos::reliable(10)),
             get_map: Service::new(own("get_map")),
             get_foothold: Service::new(own("get_foothold")),
-            odometry: match config.ros2.odometry_type {
+            odometry: match names.odometry_type {
                 OdometryType::Odometry => OdometryTopic::Odometry(Topic::new(odometry, Qos::reliable(100))),
                 OdometryType::PoseStamped => OdometryTopic::PoseStamped(Topic::new(odometry, Qos::reliable(100))),
             },
-            imu_propagate: config.ros2.imu_propagate.clone().map(|name| Topic::new(name, Qos::reliable(400))),
+            imu_propagate: names.imu_propagate.map(|name| Topic::new(name.clone(), Qos::reliable(400))),
             infra: [infra(1), infra(2)],
             imu: Topic::new(cam("imu"), Qos::reliable(400)),
+            // The authors' markers live 0.5 s: only the newest frame's matter.
+            polygon_markers: names.polygon_markers.map(|name| Topic::new(name.clone(), Qos::reliable(2))),
         }
     }
 

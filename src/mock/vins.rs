@@ -1,6 +1,8 @@
-//! The mock VINS: a sequence's poses published as VINS-Fusion's ROS 2 port publishes its
-//! odometry (nav_msgs/Odometry on `/odometry`, or PoseStamped if the config says so), from a
-//! ROS 2 node of its own (`/vins_estimator`), body frame = camera frame. The sequence loops
+//! The mock VINS: a sequence's poses published as VINS-Fusion publishes its odometry
+//! (nav_msgs/Odometry, or PoseStamped if the config says so), from a node of its own
+//! (`/vins_estimator`), body frame = camera frame: on ROS 1 as the original does
+//! (`/vins_estimator/odometry`) when the config's `[ros1]` is enabled, else on ROS 2 as its
+//! ROS 2 port does (`/odometry`). The sequence loops
 //! on the wall clock ([`super::SequenceClock`]), as the mock camera replays it.
 //!
 //! Timed as VINS-Fusion on a robot's CPU: a pose per processed image at 10-20 Hz, each
@@ -17,9 +19,10 @@ use nalgebra::Isometry3;
 use super::SequenceClock;
 use crate::clock::now_ns;
 use crate::config::Config;
-use crate::interface::{Interface, OdometryTopic, convert};
+use crate::interface::{OdometryTopic, convert};
 use crate::pose::{PoseBuffer, RawPose};
 use crate::ros2::{Node, NodeOptions, RosName};
+use crate::runtime::wires::Wires;
 use crate::sequence::Sequence;
 use crate::types::StampNs;
 
@@ -98,19 +101,30 @@ pub async fn run(seq: &Sequence, config: &Config, opts: MockVinsOptions) -> Resu
     }
     let last_ns = seq.poses.last().map_or(0, |p| p.stamp_ns);
 
-    let session = crate::ros2::session::open(crate::ros2::session::config(&config.zenoh.config_file)?).await?;
-    let options =
-        NodeOptions { namespace: RosName::root(), name: "vins_estimator".into(), ..config.ros2.node_options() };
-    let node = Node::new(&session, options).await?;
-    let interface = Interface::new(config);
-    let publisher = match &interface.odometry {
-        OdometryTopic::Odometry(t) => Publish::Odometry(node.publisher(t).await?),
-        OdometryTopic::PoseStamped(t) => Publish::PoseStamped(node.publisher(t).await?),
+    let wires = match config.ros1.enabled {
+        true => Wires { ros2: None, ros1: Some(Wires::ros1(config, "/vins_estimator").await?) },
+        false => {
+            let session = crate::ros2::session::open(crate::ros2::session::config(&config.zenoh.config_file)?).await?;
+            let options =
+                NodeOptions { namespace: RosName::root(), name: "vins_estimator".into(), ..config.ros2.node_options() };
+            let node = std::sync::Arc::new(Node::new(&session, options).await?);
+            Wires { ros2: Some(Wires::ros2(config, node)), ros1: None }
+        }
     };
+    let names = wires.names().ok_or_else(|| anyhow!("the mock VINS has no ROS layer"))?;
+    let odometry = wires.publisher(|i| match &i.odometry {
+        OdometryTopic::Odometry(t) => Some(t),
+        OdometryTopic::PoseStamped(_) => None,
+    });
+    let pose_stamped = wires.publisher(|i| match &i.odometry {
+        OdometryTopic::PoseStamped(t) => Some(t),
+        OdometryTopic::Odometry(_) => None,
+    });
+    let (odometry, pose_stamped) = (odometry.await?, pose_stamped.await?);
     tracing::info!(
         "mock VINS: {} looped on {} at {} Hz, {} ms late (jitter {} ms)",
         seq.dir.display(),
-        interface.odometry_name(),
+        names.odometry_name(),
         opts.rate_hz,
         opts.latency_ms,
         opts.jitter_ms
@@ -124,21 +138,20 @@ pub async fn run(seq: &Sequence, config: &Config, opts: MockVinsOptions) -> Resu
         raw.position[2] += opts.drift_mm_per_s * 1e-3 * stamp.saturating_sub(started) as f64 * 1e-9;
         Ok(raw)
     };
-    let (publisher, pose_at) = (&publisher, &pose_at);
+    let (odometry, pose_stamped, pose_at) = (&odometry, &pose_stamped, &pose_at);
     let optimised = publish_timed(PoseTiming::new(&opts, started), started, opts.duration, |stamp| async move {
-        let odometry = convert::odometry(&pose_at(stamp)?, WORLD_FRAME, BODY_FRAME);
-        match publisher {
-            Publish::Odometry(p) => p.put(&odometry).await?,
-            Publish::PoseStamped(p) => {
-                let stamped = crate::ros2::msg::PoseStamped { header: odometry.header, pose: odometry.pose.pose };
-                p.put(&stamped).await?
-            }
+        let msg = convert::odometry(&pose_at(stamp)?, WORLD_FRAME, BODY_FRAME);
+        if pose_stamped.wanted() {
+            pose_stamped
+                .put(&crate::ros2::msg::PoseStamped { header: msg.header.clone(), pose: msg.pose.pose })
+                .await?;
         }
+        odometry.put(&msg).await?;
         Ok(())
     });
     let propagated = async {
-        let (Some(topic), Some(timing)) = (&interface.imu_propagate, opts.propagated()) else { return Ok(0) };
-        let publisher = node.publisher(topic).await?;
+        let (true, Some(timing)) = (names.imu_propagate.is_some(), opts.propagated()) else { return Ok(0) };
+        let publisher = wires.publisher(|i| i.imu_propagate.as_ref()).await?;
         publish_timed(PoseTiming::new(&timing, started), started, opts.duration, |stamp| {
             let publisher = &publisher;
             async move { Ok(publisher.put(&convert::odometry(&pose_at(stamp)?, WORLD_FRAME, BODY_FRAME)).await?) }
@@ -216,9 +229,4 @@ impl PoseTiming {
         self.last_publish_ns = publish;
         (stamp, publish)
     }
-}
-
-enum Publish {
-    Odometry(crate::ros2::Publisher<crate::ros2::msg::Odometry>),
-    PoseStamped(crate::ros2::Publisher<crate::ros2::msg::PoseStamped>),
 }

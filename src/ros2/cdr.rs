@@ -4,6 +4,10 @@
 //! the header; strings as a u32 length with the NUL counted and the NUL; sequences as a u32
 //! count and the elements; fixed arrays as the elements alone.
 //!
+//! ROS 1's serialization is the same walk without the header, the alignment and the NULs,
+//! and with std_msgs/Header's `seq` (written 0, skipped on reading): [`to_ros1_vec`] and
+//! [`from_ros1_slice`] carry the same message structs over TCPROS (src/ros1/).
+//!
 //! polymap's own serde codec rather than a CDR crate: messages come from the network, and
 //! decoding must never allocate more than the message it reads. Every length is checked
 //! against the bytes left before anything is made of it (the `cdr` crate allocated the
@@ -15,6 +19,9 @@ use serde::{Deserialize, Serialize, ser};
 
 /// Largest message polymap decodes, bytes: odometry is about 700, a service request less.
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
+
+/// The field rosidl gives an empty ROS 2 message; ROS 1's empty messages have no bytes.
+const ROSIDL_EMPTY_FIELD: &str = "structure_needs_at_least_one_member";
 
 const HEADER_LE: [u8; 4] = [0, 1, 0, 0];
 const HEADER_BE: [u8; 4] = [0, 0, 0, 0];
@@ -50,9 +57,34 @@ impl de::Error for CdrError {
 
 /// A message as little-endian CDR with its encapsulation header.
 pub fn to_vec<T: Serialize + ?Sized>(msg: &T) -> Vec<u8> {
-    let mut s = Writer { out: HEADER_LE.to_vec() };
+    let mut s = Writer { out: HEADER_LE.to_vec(), ros1: false };
     msg.serialize(&mut s).expect("ROS message types hold only what CDR can carry");
     s.out
+}
+
+/// A message as ROS 1 serializes it (TCPROS, rosbag): no header, no alignment.
+pub fn to_ros1_vec<T: Serialize + ?Sized>(msg: &T) -> Vec<u8> {
+    let mut s = Writer { out: Vec::new(), ros1: true };
+    msg.serialize(&mut s).expect("ROS message types hold only what ROS 1 can carry");
+    s.out
+}
+
+/// A message from ROS 1 bytes; every byte must be the message's.
+pub fn from_ros1_slice<'a, T: Deserialize<'a>>(bytes: &'a [u8]) -> Result<T, CdrError> {
+    if bytes.len() > MAX_MESSAGE_BYTES {
+        return Err(CdrError::TooLarge(bytes.len()));
+    }
+    from_ros1_slice_unlimited(bytes)
+}
+
+/// As [`from_ros1_slice`], for a message whose size its caller has bounded (images, depth).
+pub fn from_ros1_slice_unlimited<'a, T: Deserialize<'a>>(bytes: &'a [u8]) -> Result<T, CdrError> {
+    let mut r = Reader { body: bytes, pos: 0, little: true, ros1: true };
+    let msg = T::deserialize(&mut r)?;
+    match r.body.len() - r.pos {
+        0 => Ok(msg),
+        n => Err(CdrError::Trailing(n)),
+    }
 }
 
 /// A message from CDR bytes (either endianness). Trailing padding of up to 3 bytes is
@@ -66,7 +98,7 @@ pub fn from_slice<'a, T: Deserialize<'a>>(bytes: &'a [u8]) -> Result<T, CdrError
         Some(h) if h[..2] == HEADER_BE[..2] => false,
         _ => return Err(CdrError::Header(bytes.iter().take(4).copied().collect())),
     };
-    let mut r = Reader { body: &bytes[4..], pos: 0, little };
+    let mut r = Reader { body: &bytes[4..], pos: 0, little, ros1: false };
     let msg = T::deserialize(&mut r)?;
     match r.body.len() - r.pos {
         0..=3 => Ok(msg),
@@ -76,10 +108,15 @@ pub fn from_slice<'a, T: Deserialize<'a>>(bytes: &'a [u8]) -> Result<T, CdrError
 
 struct Writer {
     out: Vec<u8>,
+    /// ROS 1's layout rather than CDR's.
+    ros1: bool,
 }
 
 impl Writer {
     fn align(&mut self, n: usize) {
+        if self.ros1 {
+            return;
+        }
         let body = self.out.len() - 4;
         self.out.resize(self.out.len() + (n - body % n) % n, 0);
     }
@@ -135,9 +172,11 @@ impl ser::Serializer for &mut Writer {
         self.serialize_u8(byte)
     }
     fn serialize_str(self, v: &str) -> Result<(), CdrError> {
-        self.len(v.len() + 1)?;
+        self.len(v.len() + usize::from(!self.ros1))?;
         self.out.extend_from_slice(v.as_bytes());
-        self.out.push(0);
+        if !self.ros1 {
+            self.out.push(0);
+        }
         Ok(())
     }
     fn serialize_bytes(self, v: &[u8]) -> Result<(), CdrError> {
@@ -194,7 +233,10 @@ impl ser::Serializer for &mut Writer {
     fn serialize_map(self, _: Option<usize>) -> Result<Self::SerializeMap, CdrError> {
         Err(CdrError::Invalid("CDR has no maps".into()))
     }
-    fn serialize_struct(self, _: &'static str, _: usize) -> Result<Self, CdrError> {
+    fn serialize_struct(self, name: &'static str, _: usize) -> Result<Self, CdrError> {
+        if self.ros1 && name == "Header" {
+            self.serialize_u32(0)?; // ROS 1's seq: roscpp and rospy fill in their own
+        }
         Ok(self)
     }
     fn serialize_struct_variant(
@@ -244,7 +286,10 @@ impl ser::SerializeTupleStruct for &mut Writer {
 impl ser::SerializeStruct for &mut Writer {
     type Ok = ();
     type Error = CdrError;
-    fn serialize_field<T: Serialize + ?Sized>(&mut self, _: &'static str, v: &T) -> Result<(), CdrError> {
+    fn serialize_field<T: Serialize + ?Sized>(&mut self, name: &'static str, v: &T) -> Result<(), CdrError> {
+        if self.ros1 && name == ROSIDL_EMPTY_FIELD {
+            return Ok(());
+        }
         v.serialize(&mut **self)
     }
     fn end(self) -> Result<(), CdrError> {
@@ -256,6 +301,8 @@ struct Reader<'a> {
     body: &'a [u8],
     pos: usize,
     little: bool,
+    /// ROS 1's layout rather than CDR's.
+    ros1: bool,
 }
 
 impl<'a> Reader<'a> {
@@ -263,9 +310,14 @@ impl<'a> Reader<'a> {
         self.body.len() - self.pos
     }
 
+    /// Where the reader is, counted from the message's first byte.
+    fn at(&self) -> usize {
+        self.pos + if self.ros1 { 0 } else { 4 }
+    }
+
     fn take(&mut self, n: usize) -> Result<&'a [u8], CdrError> {
         if n > self.left() {
-            return Err(CdrError::Truncated { at: self.pos + 4, wanted: n - self.left() });
+            return Err(CdrError::Truncated { at: self.at(), wanted: n - self.left() });
         }
         let bytes = &self.body[self.pos..self.pos + n];
         self.pos += n;
@@ -273,6 +325,9 @@ impl<'a> Reader<'a> {
     }
 
     fn align(&mut self, n: usize) -> Result<(), CdrError> {
+        if self.ros1 {
+            return Ok(());
+        }
         let pad = (n - self.pos % n) % n;
         self.take(pad).map(|_| ())
     }
@@ -289,7 +344,7 @@ impl<'a> Reader<'a> {
     /// A string's or sequence's length, never more than the bytes left: every element of a
     /// ROS message takes at least one byte.
     fn len(&mut self) -> Result<usize, CdrError> {
-        let at = self.pos + 4;
+        let at = self.at();
         let n = u32::from_le_bytes(self.array::<4>()?) as usize;
         if n > self.left() {
             return Err(CdrError::LengthTooLong { at, claimed: n as u64, left: self.left() });
@@ -298,9 +353,12 @@ impl<'a> Reader<'a> {
     }
 
     fn string(&mut self) -> Result<&'a str, CdrError> {
-        let at = self.pos + 4;
+        let at = self.at();
         let n = self.len()?;
         let bytes = self.take(n)?;
+        if self.ros1 {
+            return std::str::from_utf8(bytes).map_err(|e| CdrError::Invalid(format!("the string at byte {at}: {e}")));
+        }
         // The count includes a terminating NUL; a few writers send an empty string as 0.
         let text = match bytes.split_last() {
             Some((0, text)) => text,
@@ -342,7 +400,7 @@ impl<'de> de::Deserializer<'de> for &mut Reader<'de> {
         match self.take(1)?[0] {
             0 => v.visit_bool(false),
             1 => v.visit_bool(true),
-            b => Err(CdrError::Invalid(format!("{b} at byte {} is not a bool", self.pos + 3))),
+            b => Err(CdrError::Invalid(format!("{b} at byte {} is not a bool", self.at() - 1))),
         }
     }
     fn deserialize_char<V: Visitor<'de>>(self, v: V) -> Result<V::Value, CdrError> {
@@ -393,10 +451,16 @@ impl<'de> de::Deserializer<'de> for &mut Reader<'de> {
     }
     fn deserialize_struct<V: Visitor<'de>>(
         self,
-        _: &'static str,
+        name: &'static str,
         fields: &'static [&'static str],
         v: V,
     ) -> Result<V::Value, CdrError> {
+        if self.ros1 && name == "Header" {
+            self.take(4)?; // ROS 1's seq
+        }
+        if self.ros1 && fields == [ROSIDL_EMPTY_FIELD] {
+            return v.visit_seq(de::value::SeqDeserializer::new(std::iter::once(0u8)));
+        }
         self.deserialize_tuple(fields.len(), v)
     }
     fn deserialize_enum<V: Visitor<'de>>(

@@ -53,6 +53,11 @@ impl Qos {
     }
 
     /// The depth a cache or queue keeps.
+    /// Whether a late subscriber gets the last samples (ROS 1's latching).
+    pub fn is_latched(&self) -> bool {
+        self.durability == Durability::TransientLocal
+    }
+
     pub fn depth(&self) -> u32 {
         match self.history {
             History::KeepLast(0) | History::KeepAll => RMW_ZENOH_DEFAULT_DEPTH,

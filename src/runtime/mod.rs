@@ -29,6 +29,7 @@ pub mod services;
 pub mod slot;
 pub mod sources;
 pub mod status;
+pub mod wires;
 pub mod worker;
 
 use std::sync::Arc;
@@ -40,7 +41,6 @@ use parking_lot::Mutex;
 
 use crate::clock::now_ns;
 use crate::config::Config;
-use crate::interface::Interface;
 use crate::map::PolygonMap;
 use crate::pose::PoseBuffer;
 use crate::ros2::Node;
@@ -54,10 +54,14 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
     crate::map::persist::remove_stale_configured(&config.map);
     let session = crate::ros2::session::open(crate::ros2::session::config(&config.zenoh.config_file)?).await?;
     let node = Arc::new(Node::new(&session, config.ros2.node_options()).await?);
-    let interface = Interface::new(config);
+    let ros1 = match config.ros1.enabled {
+        true => Some(wires::Wires::ros1(config, &config.ros1.node_name()).await?),
+        false => None,
+    };
+    let wires = wires::Wires { ros2: Some(wires::Wires::ros2(config, node)), ros1 };
     let poses =
         Arc::new(Mutex::new(PoseBuffer::with_limits(4096, crate::pose::PoseLimits::from_config(&config.poses))));
-    let _odometry = odometry::subscribe(&node, &interface, poses.clone()).await?;
+    let _odometry = odometry::subscribe(&wires, poses.clone()).await?;
     let map = Arc::new(Mutex::new(crate::map::persist::initial_map(&config.map)));
     let counters = Arc::new(Counters::default());
     let stop = Arc::new(AtomicBool::new(false));
@@ -72,13 +76,13 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
     };
     let worker = worker::spawn(config, shared, events_tx)?;
     let camera = sources::start_depth(config, seq.as_ref(), slot, stop.clone(), counters.clone()).await?;
-    let d435i = sources::start_d435i(config, seq.as_ref(), node.clone(), &interface, stop.clone()).await?;
+    let d435i = sources::start_d435i(config, seq.as_ref(), &wires, stop.clone()).await?;
     // This run's epoch: versions count from the snapshot's within it, and a client seeing a
     // new one knows the mapper restarted.
     let epoch = now_ns();
     let map_frame = &config.ros2.map_frame;
-    let _services = services::serve(&node, &interface, map.clone(), counters.clone(), epoch, map_frame).await?;
-    let mut publishers = publish::Publishers::new(&node, &interface, config, epoch).await?;
+    let _services = services::serve(&wires, map.clone(), counters.clone(), epoch, map_frame).await?;
+    let mut publishers = publish::Publishers::new(&wires, config, epoch).await?;
     tracing::info!(
         "polymap {} on ROS 2 ({:?}, domain {})",
         config.ros2.namespace,
@@ -109,7 +113,10 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
             let m = map.lock();
             (m.drift.z, m.len())
         };
-        counters.report(crate::stats::spread(latencies), p, drift_z, len)
+        let mut r = counters.report(crate::stats::spread(latencies), p, drift_z, len);
+        // A ROS 1 peer's connection or call that was refused is a refused request too.
+        r.requests_refused += wires.ros1_refused();
+        r
     };
     // The worker's events channel closes when the thread ends, by a stop or a panic.
     let worker_ended = loop {
@@ -173,6 +180,9 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
     }
     if worker_ended {
         tracing::warn!("the extractor thread stopped by itself");
+    }
+    if let Some((node, _)) = &wires.ros1 {
+        node.shutdown().await;
     }
     save_snapshot(&map, config).await.context("saving the map at shutdown")?;
     Ok(report(&all_latencies))

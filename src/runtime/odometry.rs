@@ -6,46 +6,51 @@ use std::sync::Arc;
 
 use parking_lot::Mutex;
 
-use crate::interface::{Interface, OdometryTopic, convert};
+use super::wires::{Held, WireError, Wires};
+use crate::interface::{OdometryTopic, convert};
 use crate::pose::{PoseBuffer, RawPose};
 use crate::ros2::cdr::CdrError;
-use crate::ros2::{Node, Ros2Error, Subscription};
 
-/// Feeds `buffer` from the odometry topic (and the propagated odometry's, when used).
-pub async fn subscribe(
-    node: &Node,
-    interface: &Interface,
-    buffer: Arc<Mutex<PoseBuffer>>,
-) -> Result<Vec<Subscription>, Ros2Error> {
-    let name = interface.odometry_name().to_string();
-    let optimised = buffer.clone();
-    let mut subscriptions = vec![match &interface.odometry {
-        OdometryTopic::Odometry(topic) => {
-            node.subscribe(topic, move |m| {
-                let pose = m.map_err(decode_error).and_then(|m| convert::pose_of_odometry(&m));
-                take(&optimised, &name, Stream::Optimised, pose)
-            })
-            .await?
-        }
-        OdometryTopic::PoseStamped(topic) => {
-            node.subscribe(topic, move |m| {
-                let pose = m.map_err(decode_error).and_then(|m| convert::pose_of_pose_stamped(&m));
-                take(&optimised, &name, Stream::Optimised, pose)
-            })
-            .await?
-        }
-    }];
-    if let Some(topic) = &interface.imu_propagate {
-        let name = topic.name.to_string();
-        subscriptions.push(
-            node.subscribe(topic, move |m| {
-                let pose = m.map_err(decode_error).and_then(|m| convert::pose_of_odometry(&m));
-                take(&buffer, &name, Stream::Propagated, pose)
-            })
+/// Feeds `buffer` from the odometry topic (and the propagated odometry's, when used), on
+/// every ROS layer the mapper speaks.
+pub async fn subscribe(wires: &Wires, buffer: Arc<Mutex<PoseBuffer>>) -> Result<Vec<Held>, WireError> {
+    let into = |stream: Stream| {
+        let buffer = buffer.clone();
+        move |topic: &str, pose: Result<RawPose, String>| take(&buffer, topic, stream, pose)
+    };
+    let (optimised, pose_stamped, propagated) =
+        (into(Stream::Optimised), into(Stream::Optimised), into(Stream::Propagated));
+    let mut held = wires
+        .subscribe(
+            |i| match &i.odometry {
+                OdometryTopic::Odometry(t) => Some(t),
+                OdometryTopic::PoseStamped(_) => None,
+            },
+            move |topic, m| optimised(topic, m.map_err(decode_error).and_then(|m| convert::pose_of_odometry(&m))),
+        )
+        .await?;
+    held.extend(
+        wires
+            .subscribe(
+                |i| match &i.odometry {
+                    OdometryTopic::PoseStamped(t) => Some(t),
+                    OdometryTopic::Odometry(_) => None,
+                },
+                move |topic, m| {
+                    pose_stamped(topic, m.map_err(decode_error).and_then(|m| convert::pose_of_pose_stamped(&m)))
+                },
+            )
             .await?,
-        );
-    }
-    Ok(subscriptions)
+    );
+    held.extend(
+        wires
+            .subscribe(
+                |i| i.imu_propagate.as_ref(),
+                move |topic, m| propagated(topic, m.map_err(decode_error).and_then(|m| convert::pose_of_odometry(&m))),
+            )
+            .await?,
+    );
+    Ok(held)
 }
 
 /// Which of VINS's streams a pose came on.

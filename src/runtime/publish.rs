@@ -2,26 +2,30 @@
 //! polymap's topics. Every frame: its polygons, its map update (versioned), the drift on /tf.
 //! When the map changed, at most every period: the whole map and its markers (transient
 //! local: a late subscriber gets the latest at once), and the planar terrain around the robot.
+//! Each goes out on ROS 2 and, when enabled, ROS 1 ([`Wires`]); ROS 1 also gets each frame's
+//! polygons as the paper authors' node sends them.
 
 use parking_lot::Mutex;
 
 use super::status::Report;
+use super::wires::{Out, WireError, Wires};
 use super::worker::FrameEvent;
 use crate::config::{Config, PlanarTerrainConfig};
-use crate::interface::{Interface, convert, terrain};
+use crate::interface::{convert, terrain};
 use crate::map::PolygonMap;
 use crate::map::elevation::GridSpec;
 use crate::ros2::msg::{FramePolygons, Map, MapUpdate, MarkerArray, PlanarTerrain, Status, TfMessage};
-use crate::ros2::{Node, Publisher, Ros2Error};
 
 pub struct Publishers {
-    frame_polygons: Publisher<FramePolygons>,
-    map_updates: Publisher<MapUpdate>,
-    map: Publisher<Map>,
-    markers: Publisher<MarkerArray>,
-    tf: Publisher<TfMessage>,
-    planar_terrain: Option<Publisher<PlanarTerrain>>,
-    status: Publisher<Status>,
+    frame_polygons: Out<FramePolygons>,
+    map_updates: Out<MapUpdate>,
+    map: Out<Map>,
+    markers: Out<MarkerArray>,
+    tf: Out<TfMessage>,
+    planar_terrain: Option<Out<PlanarTerrain>>,
+    status: Out<Status>,
+    /// ROS 1's `/polygon_new_markers`.
+    polygon_markers: Out<MarkerArray>,
     /// This run of the mapper (its start, ns): versions count within it.
     epoch: u64,
     map_frame: String,
@@ -33,18 +37,19 @@ pub struct Publishers {
 }
 
 impl Publishers {
-    pub async fn new(node: &Node, interface: &Interface, config: &Config, epoch: u64) -> Result<Publishers, Ros2Error> {
+    pub async fn new(wires: &Wires, config: &Config, epoch: u64) -> Result<Publishers, WireError> {
         Ok(Publishers {
-            frame_polygons: node.publisher(&interface.frame_polygons).await?,
-            map_updates: node.publisher(&interface.map_updates).await?,
-            map: node.publisher(&interface.map).await?,
-            markers: node.publisher(&interface.markers).await?,
-            tf: node.publisher(&interface.tf).await?,
+            frame_polygons: wires.publisher(|i| Some(&i.frame_polygons)).await?,
+            map_updates: wires.publisher(|i| Some(&i.map_updates)).await?,
+            map: wires.publisher(|i| Some(&i.map)).await?,
+            markers: wires.publisher(|i| Some(&i.markers)).await?,
+            tf: wires.publisher(|i| Some(&i.tf)).await?,
             planar_terrain: match config.planar_terrain.enabled {
-                true => Some(node.publisher(&interface.planar_terrain).await?),
+                true => Some(wires.publisher(|i| Some(&i.planar_terrain)).await?),
                 false => None,
             },
-            status: node.publisher(&interface.status).await?,
+            status: wires.publisher(|i| Some(&i.status)).await?,
+            polygon_markers: wires.publisher(|i| i.polygon_markers.as_ref()).await?,
             epoch,
             map_frame: config.ros2.map_frame.clone(),
             odometry_frame: config.ros2.odometry_frame.clone(),
@@ -55,8 +60,12 @@ impl Publishers {
     }
 
     /// A frame's polygons, the map update it made, and the drift it left.
-    pub async fn frame(&self, e: &FrameEvent) -> Result<(), Ros2Error> {
-        self.frame_polygons.put(&convert::frame_polygons(e.stamp_ns, &self.map_frame, &e.polygons)).await?;
+    pub async fn frame(&self, e: &FrameEvent) -> Result<(), WireError> {
+        let polygons = convert::frame_polygons(e.stamp_ns, &self.map_frame, &e.polygons);
+        if self.polygon_markers.wanted() {
+            self.polygon_markers.put(&convert::polygon_new_markers(&polygons)).await?;
+        }
+        self.frame_polygons.put(&polygons).await?;
         let delta = convert::MapDelta {
             stamp_ns: e.stamp_ns,
             epoch: self.epoch,
@@ -73,7 +82,7 @@ impl Publishers {
     }
 
     /// The whole map and its markers, if the map changed since they last went.
-    pub async fn whole_map(&mut self, map: &Mutex<PolygonMap>) -> Result<(), Ros2Error> {
+    pub async fn whole_map(&mut self, map: &Mutex<PolygonMap>) -> Result<(), WireError> {
         if self.whole_map_sent == Some(map.lock().version()) {
             return Ok(());
         }
@@ -86,7 +95,7 @@ impl Publishers {
     }
 
     /// The planar terrain around `robot` (map frame), if the map changed or the grid moved.
-    pub async fn terrain(&mut self, map: &Mutex<PolygonMap>, robot: [f64; 3]) -> Result<(), Ros2Error> {
+    pub async fn terrain(&mut self, map: &Mutex<PolygonMap>, robot: [f64; 3]) -> Result<(), WireError> {
         let Some(publisher) = &self.planar_terrain else { return Ok(()) };
         let t = &self.terrain;
         let centre = GridSpec::around([robot[0], robot[1]], t.resolution_m, [t.length_x_m, t.length_y_m]).centre;
@@ -100,7 +109,7 @@ impl Publishers {
         Ok(())
     }
 
-    pub async fn status(&self, report: &Report) -> Result<(), Ros2Error> {
+    pub async fn status(&self, report: &Report) -> Result<(), WireError> {
         self.status.put(&report.message(crate::clock::now_ns(), &self.map_frame)).await
     }
 }

@@ -9,10 +9,11 @@ use anyhow::{Result, anyhow, bail};
 
 use super::slot::Slot;
 use super::status::Counters;
+use super::wires::{Out, Wires};
 use crate::camera::D435iSample;
 use crate::config::{Config, D435iKind, DepthSourceKind};
-use crate::interface::{Interface, convert};
-use crate::ros2::Node;
+use crate::interface::convert;
+use crate::ros2::msg::{CameraInfo, Image, Imu};
 use crate::sequence::Sequence;
 
 /// The sequence the mocks replay, for a mock depth source (None for a camera or a bag).
@@ -92,8 +93,7 @@ async fn realsense_depth(
 pub async fn start_d435i(
     config: &Config,
     seq: Option<&Sequence>,
-    node: Arc<Node>,
-    interface: &Interface,
+    wires: &Wires,
     stop: Arc<AtomicBool>,
 ) -> Result<Option<tokio::task::JoinHandle<()>>> {
     use crate::mock::d435i::MockD435i;
@@ -112,9 +112,16 @@ pub async fn start_d435i(
         }
         D435iKind::Realsense => real_d435i(&cfg, tx, stop).await?,
     }
-    let interface = interface.clone();
+    let mut infra = Vec::new();
+    for index in 0..2 {
+        infra.push((
+            wires.publisher(|i| Some(&i.infra[index].image)).await?,
+            wires.publisher(|i| Some(&i.infra[index].camera_info)).await?,
+        ));
+    }
+    let imu = wires.publisher(|i| Some(&i.imu)).await?;
     Ok(Some(tokio::spawn(async move {
-        if let Err(e) = publish_d435i(&node, &interface, &cfg, rx).await {
+        if let Err(e) = publish_d435i(&infra, &imu, &cfg, rx).await {
             tracing::warn!("D435i publishing stopped: {e:#}");
         }
     })))
@@ -123,17 +130,12 @@ pub async fn start_d435i(
 /// Publishes the D435i's samples (real or mock, the same way) as realsense-ros does: each
 /// IR image with its camera info, and the united IMU.
 async fn publish_d435i(
-    node: &Node,
-    interface: &Interface,
+    infra: &[(Out<Image>, Out<CameraInfo>)],
+    imu: &Out<Imu>,
     cfg: &crate::config::D435iConfig,
     mut samples: tokio::sync::mpsc::Receiver<D435iSample>,
 ) -> Result<()> {
     use crate::mock::d435i::BASELINE_M;
-    let mut infra = Vec::new();
-    for topics in &interface.infra {
-        infra.push((node.publisher(&topics.image).await?, node.publisher(&topics.camera_info).await?));
-    }
-    let imu = node.publisher(&interface.imu).await?;
     while let Some(sample) = samples.recv().await {
         match sample {
             D435iSample::Infrared { index, stamp_ns, intrinsics, pixels } => {

@@ -23,8 +23,10 @@ import threading
 import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "examples" / "python"))
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 
 from rmw_zenoh import Peer  # noqa: E402
+from vins_schedule import Schedule  # noqa: E402
 from rosbags.typesys import get_types_from_msg  # noqa: E402
 
 # The packages' ROS 2 message definitions (grid_map jazzy; leggedrobotics' plane_segmentation
@@ -56,19 +58,6 @@ TOPICS = {
     "/camera/camera/infra1/camera_info": "sensor_msgs/msg/CameraInfo",
     "/camera/camera/imu": "sensor_msgs/msg/Imu",
 }
-
-
-def read_poses(seq):
-    """(stamp ns, position, quaternion xyzw) per frame, stamps read exactly from the text."""
-    out = []
-    for line in (seq / "poses.txt").read_text().splitlines():
-        if not line.strip() or line.startswith("#"):
-            continue
-        f = line.split()
-        sec, _, frac = f[0].partition(".")
-        stamp = int(sec) * 1_000_000_000 + int((frac + "000000000")[:9])
-        out.append((stamp, [float(v) for v in f[1:4]], [float(v) for v in f[4:8]]))
-    return out
 
 
 class Stream:
@@ -146,17 +135,7 @@ def run(peer, args):
     for name, typename in TOPICS.items():
         peer.subscribe(name, typename, taker(name))
 
-    # VINS: the sequence's poses on the mock camera's looped clock (mock/clock.rs's rule: the
-    # loop walks the sequence forward and then back, so its period is twice the walk; frame
-    # k is shown at offset stamp_k - first on the way out and 2 * span - (stamp_k - first) on
-    # the way back, the last and first frames once each).
-    poses = read_poses(args.sequence)
-    first, last = poses[0][0], poses[-1][0]
-    span = last - first
-    period = 2 * span
-    shown_at = [(stamp - first, p, q) for stamp, p, q in poses]
-    shown_at += [(period - (stamp - first), p, q) for stamp, p, q in poses[1:-1]]
-    shown_at.sort(key=lambda shown: shown[0])
+    schedule = Schedule(args.sequence)
     put = peer.publisher("/odometry", "nav_msgs/msg/Odometry", qos="::,100:,:,:,,")
     Odometry = peer.msg("nav_msgs/msg/Odometry")
     m = peer.store.types
@@ -178,20 +157,12 @@ def run(peer, args):
                 covariance=np.zeros(36)))
 
     published = 0
-    sent = set()
     start = time.time()
     status_at_2s = None
     while time.time() - start < args.seconds:
-        now = time.time_ns()
-        loop_start = now - now % period
-        # Every frame the loop has shown in the last 100 ms, stamped as the camera stamps it.
-        for base in (loop_start - period, loop_start):
-            for offset, p, q in shown_at:
-                shown = base + offset
-                if now - 100_000_000 <= shown <= now and shown not in sent:
-                    put(odometry(shown, p, q))
-                    sent.add(shown)
-                    published += 1
+        for shown, p, q in schedule.due(time.time_ns()):
+            put(odometry(shown, p, q))
+            published += 1
         if status_at_2s is None and time.time() - start > 3.0:
             with lock:
                 status_at_2s = streams[f"{NS}/status"].last

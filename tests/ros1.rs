@@ -1,0 +1,588 @@
+//! polymap as the robot's ROS 1 nodes see it, against a real ROS 1: Debian's ros_comm
+//! (Noetic's 1.15): `roscore`, rospy, rostopic, rosnode, rosservice, and genmsg/genpy, which
+//! generate polymap_msgs for rospy from polymap's own package. Nothing here shares code with
+//! polymap but the test's own bookkeeping: the peer is tests/peer/ros1_peer.py on rospy.
+//!
+//! scripts/test.sh installs the Debian packages.
+
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use polymap::ros2::session::{free_loopback_port, loopback_json5};
+
+/// Debian's python, where rospy is.
+const PYTHON: &str = "/usr/bin/python3";
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A `roscore` on a port of its own, stopped (SIGINT, as a user would) when dropped.
+struct Roscore {
+    child: Child,
+    uri: String,
+    dir: tempfile::TempDir,
+}
+
+impl Roscore {
+    fn start() -> Roscore {
+        let dir = tempfile::tempdir().unwrap();
+        let port = free_loopback_port().unwrap();
+        let uri = format!("http://127.0.0.1:{port}/");
+        let log = std::fs::File::create(dir.path().join("roscore.log")).unwrap();
+        let child = Command::new("roscore")
+            .args(["-p", &port.to_string()])
+            .env("ROS_MASTER_URI", &uri)
+            .env("ROS_HOME", dir.path())
+            .env("ROS_HOSTNAME", "127.0.0.1")
+            .stdout(log.try_clone().unwrap())
+            .stderr(log)
+            .spawn()
+            .expect("roscore (scripts/test.sh installs Debian's ros-core)");
+        let core = Roscore { child, uri, dir };
+        let deadline = Instant::now() + Duration::from_secs(30);
+        while core.command("rosnode", &["list"]).map(|o| !o.contains("/rosout")).unwrap_or(true) {
+            assert!(Instant::now() < deadline, "roscore did not come up: {}", core.log());
+            std::thread::sleep(Duration::from_millis(300));
+        }
+        core
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(self.dir.path().join("roscore.log")).unwrap_or_default()
+    }
+
+    /// The environment a ROS 1 user has: the master, this machine, polymap_msgs for rospy.
+    fn env(&self, cmd: &mut Command) {
+        cmd.env("ROS_MASTER_URI", &self.uri)
+            .env("ROS_HOSTNAME", "127.0.0.1")
+            .env("ROS_HOME", self.dir.path())
+            .env("PYTHONPATH", python_messages());
+    }
+
+    /// A ROS 1 command line tool's output, or its failure.
+    fn command(&self, tool: &str, args: &[&str]) -> Result<String, String> {
+        let mut cmd = Command::new(tool);
+        cmd.args(args);
+        self.env(&mut cmd);
+        let out = cmd.output().map_err(|e| format!("{tool}: {e}"))?;
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        match out.status.success() {
+            true => Ok(text),
+            false => Err(format!("{tool} {args:?}: {text}{}", String::from_utf8_lossy(&out.stderr))),
+        }
+    }
+}
+
+impl Drop for Roscore {
+    fn drop(&mut self) {
+        // SIGINT: roslaunch stops rosmaster and rosout with it.
+        unsafe { libc::kill(self.child.id() as i32, libc::SIGINT) };
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// polymap_msgs as a robot builds it (its catkin package, `catkin_make` in a workspace of
+/// its own), and the terrain packages polymap sends as genpy generates them from their
+/// Noetic definitions (polymap carries those): the PYTHONPATH rospy finds them on. Made once.
+fn python_messages() -> String {
+    static MADE: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    MADE.get_or_init(|| {
+        let out = std::env::temp_dir().join(format!("polymap-ros1-{}", std::process::id()));
+        let src = out.join("ws/src");
+        std::fs::create_dir_all(&src).unwrap();
+        std::os::unix::fs::symlink(root().join("polymap_msgs"), src.join("polymap_msgs")).unwrap();
+        // -C: catkin_make takes its workspace from $PWD otherwise, not from the directory it runs in.
+        let built = Command::new("catkin_make")
+            .arg("-C")
+            .arg(out.join("ws"))
+            .arg(format!("-DPYTHON_EXECUTABLE={PYTHON}"))
+            .current_dir(out.join("ws"))
+            .env("ROS_VERSION", "1")
+            .output()
+            .expect("catkin_make (scripts/test.sh installs Debian's catkin)");
+        let said = format!("{}{}", String::from_utf8_lossy(&built.stdout), String::from_utf8_lossy(&built.stderr));
+        assert!(built.status.success() && out.join("ws/devel").exists(), "catkin_make polymap_msgs: {said}");
+
+        let defs = root().join("src/ros1/definitions");
+        let py = out.join("py");
+        for package in ["grid_map_msgs", "convex_plane_decomposition_msgs"] {
+            let includes = [
+                format!("-I{package}:{}", defs.join(package).display()),
+                format!("-Igrid_map_msgs:{}", defs.join("grid_map_msgs").display()),
+                "-Istd_msgs:/usr/share/std_msgs/msg".into(),
+                "-Igeometry_msgs:/usr/share/geometry_msgs/msg".into(),
+            ];
+            let target = py.join(package).join("msg");
+            for file in std::fs::read_dir(defs.join(package)).unwrap().map(|e| e.unwrap().path()) {
+                let status = Command::new(PYTHON)
+                    .args(["/usr/lib/genpy/genmsg_py.py", "-p", package, "-o"])
+                    .arg(&target)
+                    .args(&includes)
+                    .arg(&file)
+                    .status()
+                    .expect("genpy (scripts/test.sh installs python3-genpy)");
+                assert!(status.success(), "genpy on {}", file.display());
+            }
+            let status = Command::new(PYTHON)
+                .args(["/usr/lib/genpy/genmsg_py.py", "--initpy", "-p", package, "-o"])
+                .arg(&target)
+                .status()
+                .unwrap();
+            assert!(status.success(), "genpy --initpy for {package}");
+            std::fs::write(py.join(package).join("__init__.py"), "").unwrap();
+        }
+        format!("{}:{}", out.join("ws/devel/lib/python3/dist-packages").display(), py.display())
+    })
+    .clone()
+}
+
+/// `polymap run` with `[ros1] enabled` on the bundled mock stairs (mock camera at 8 Hz,
+/// mock D435i), ROS 2 on a Zenoh port of its own; its log in `dir/mapper.log`.
+fn mapper(core: &Roscore, dir: &Path, seconds: u32) -> Child {
+    let zenoh = dir.join("mapper.json5");
+    std::fs::write(&zenoh, loopback_json5(Some(free_loopback_port().unwrap()), &[])).unwrap();
+    let config = dir.join("mapper.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[sources.depth]\nsequence = {:?}\nfps = 8\n[sources.d435i]\nkind = \"mock\"\nir_width = 320\nir_height = 240\n\
+             [pipeline]\nbackend = \"cpu\"\n[zenoh]\nconfig_file = {:?}\n[ros1]\nenabled = true\n",
+            root().join("mock_frames/straight_320").display().to_string(),
+            zenoh.display().to_string(),
+        ),
+    )
+    .unwrap();
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_polymap"));
+    cmd.args(["run", "--duration", &seconds.to_string(), "--config"])
+        .arg(&config)
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(dir.join("mapper.log")).unwrap());
+    core.env(&mut cmd);
+    cmd.spawn().unwrap()
+}
+
+/// Waits until the master lists `node`.
+fn wait_for_node(core: &Roscore, node: &str, log: &Path) {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while !core.command("rosnode", &["list"]).unwrap_or_default().lines().any(|l| l.trim() == node) {
+        assert!(
+            Instant::now() < deadline,
+            "{node} never registered: {}",
+            std::fs::read_to_string(log).unwrap_or_default()
+        );
+        std::thread::sleep(Duration::from_millis(300));
+    }
+}
+
+#[test]
+fn a_rospy_node_receives_every_topic_feeds_odometry_and_calls_the_services() {
+    let core = Roscore::start();
+    let dir = tempfile::tempdir().unwrap();
+    let mut polymap = mapper(&core, dir.path(), 60);
+    let log = dir.path().join("mapper.log");
+    wait_for_node(&core, "/polymap", &log);
+
+    // What a ROS 1 user sees of the node.
+    let topics = core.command("rostopic", &["list"]).unwrap();
+    for t in [
+        "/polygon_new_markers",
+        "/polymap/frame_polygons",
+        "/polymap/map_updates",
+        "/polymap/map",
+        "/polymap/markers",
+        "/polymap/status",
+        "/tf",
+        "/convex_plane_decomposition_ros/planar_terrain",
+        "/camera/infra1/image_rect_raw",
+        "/camera/infra1/camera_info",
+        "/camera/infra2/image_rect_raw",
+        "/camera/imu",
+    ] {
+        assert!(topics.lines().any(|l| l.trim() == t), "rostopic list lacks {t}:\n{topics}");
+    }
+    let info = core.command("rosnode", &["info", "/polymap"]).unwrap();
+    for expected in [
+        "/polygon_new_markers [visualization_msgs/MarkerArray]",
+        "/polymap/map [polymap_msgs/Map]",
+        "/vins_estimator/odometry",
+        "/polymap/get_map",
+        "/polymap/get_foothold",
+    ] {
+        assert!(info.contains(expected), "rosnode info /polymap lacks {expected:?}:\n{info}");
+    }
+    let service_type = core.command("rosservice", &["type", "/polymap/get_foothold"]).unwrap();
+    assert_eq!(service_type.trim(), "polymap_msgs/GetFoothold");
+
+    let mut peer = Command::new(PYTHON);
+    peer.arg(root().join("tests/peer/ros1_peer.py"))
+        .args(["--seconds", "14", "--sequence"])
+        .arg(root().join("mock_frames/straight_320"));
+    core.env(&mut peer);
+    let out = peer.output().unwrap();
+    // rosservice call, as a user types it, while polymap still runs.
+    let foothold = core.command("rosservice", &["call", "/polymap/get_foothold", "point: {x: 0.42, y: 0.0, z: 0.30}"]);
+    let status_echo = core.command("rostopic", &["echo", "-n", "1", "/polymap/status"]);
+    stop(&mut polymap);
+    let log_text = std::fs::read_to_string(&log).unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "peer failed: {stdout}\n{}\n{log_text}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    eprintln!("{}", serde_json::to_string_pretty(&v).unwrap());
+
+    // The paper authors' topic: closed LINE_STRIPs in the map frame, at the stairs' heights.
+    let strips = v["polygon_new_markers"].as_array().unwrap();
+    assert!(strips.len() >= 20, "{} strips on /polygon_new_markers", strips.len());
+    for s in strips {
+        assert_eq!(s["type"], 4, "LINE_STRIP: {s}");
+        assert_eq!(s["ns"], "polygons_new");
+        assert_eq!(s["frame"], "map");
+        assert_eq!(s["closed"], true, "a closed outline: {s}");
+        assert!((s["lifetime"].as_f64().unwrap() - 0.5).abs() < 1e-9);
+        assert_eq!(s["w"], 1.0);
+    }
+    // Level strips sit on the bundled stairs' treads: z a multiple of the 0.15 m rise.
+    let levels: Vec<f64> = strips
+        .iter()
+        .filter(|s| s["z_spread"].as_f64().unwrap() < 0.02)
+        .map(|s| s["z_mean"].as_f64().unwrap())
+        .collect();
+    assert!(levels.len() >= 10, "level strips: {levels:?}");
+    let mut steps: Vec<i64> = Vec::new();
+    for z in &levels {
+        let k = (z / 0.15).round();
+        assert!((z - k * 0.15).abs() < 0.03, "a level strip at z {z:.3} is on no tread");
+        steps.push(k as i64);
+    }
+    steps.sort();
+    steps.dedup();
+    assert!(steps.len() >= 3, "strips on treads {steps:?}");
+    // The vendor's stair planner takes a marker's first four points as a tread's corners:
+    // level outlines arrive as their corners (the mapped ones have 19 to 97 vertices), a
+    // tread seen whole as 4 and the closing point; one the view cuts has a corner more.
+    let mut corners: Vec<(i64, u64)> = strips
+        .iter()
+        .filter(|s| s["z_spread"].as_f64().unwrap() < 0.02)
+        .map(|s| ((s["z_mean"].as_f64().unwrap() / 0.15).round() as i64, s["points"].as_u64().unwrap() - 1))
+        .collect();
+    corners.sort();
+    eprintln!("level outlines (tread, corners): {corners:?}");
+    assert!(corners.iter().all(|&(_, n)| (3..=16).contains(&n)), "{corners:?}");
+    let mut counts: Vec<u64> = corners.iter().map(|&(_, n)| n).collect();
+    counts.sort();
+    assert!(counts[counts.len() / 2] <= 6, "median corners {}: {corners:?}", counts[counts.len() / 2]);
+    let mut four_on: Vec<i64> = corners.iter().filter(|&&(_, n)| n == 4).map(|&(k, _)| k).collect();
+    four_on.dedup();
+    assert!(four_on.len() >= 3, "4-corner outlines on treads {four_on:?}");
+
+    // Every other topic arrived.
+    let counts = &v["counts"];
+    for (topic, least) in [
+        ("/polymap/frame_polygons", 20),
+        ("/polymap/map_updates", 20),
+        ("/polymap/status", 5),
+        ("/tf", 20),
+        ("/camera/infra1/image_rect_raw", 20),
+        ("/camera/infra1/camera_info", 20),
+        ("/camera/infra2/image_rect_raw", 20),
+        ("/camera/infra2/camera_info", 20),
+        ("/camera/imu", 500),
+        ("/convex_plane_decomposition_ros/planar_terrain", 5),
+    ] {
+        assert!(counts[topic].as_u64().unwrap() >= least, "{topic}: {} messages, expected {least}+", counts[topic]);
+    }
+    assert_eq!(v["frame_polygons_frame"], "map");
+    assert_eq!(v["tf"]["parent"], "map");
+    assert_eq!(v["tf"]["child"], "world");
+    assert_eq!(v["image"]["encoding"], "mono8");
+    assert_eq!(
+        v["image"]["bytes"].as_u64(),
+        v["image"]["width"].as_u64().map(|w| w * v["image"]["height"].as_u64().unwrap())
+    );
+    // infra2's projection carries the baseline, as realsense-ros writes it.
+    assert!(v["camera_info2"]["P"][3].as_f64().unwrap() < 0.0, "{}", v["camera_info2"]);
+    assert!((v["imu"]["accel_z"].as_f64().unwrap()).abs() > 1.0, "gravity in the IMU: {}", v["imu"]);
+    assert!(v["terrain"]["regions"].as_u64().unwrap() >= 3, "{}", v["terrain"]);
+    assert_eq!(v["terrain"]["frame"], "map");
+
+    // The odometry from rospy fed the mapper: frames mapped, the absurd poses refused.
+    let status = &v["status"];
+    assert!(status["processed"].as_u64().unwrap() >= 20, "{status}");
+    assert!(status["poses_accepted"].as_u64().unwrap() >= 50, "{status}");
+    assert!(status["poses_refused"].as_u64().unwrap() >= 4, "the absurd poses: {status}");
+    assert!(log_text.contains("pose on /vins_estimator/odometry refused"), "{log_text}");
+
+    // The latched map and markers reach a subscriber that joins after the map stopped
+    // changing, at once.
+    assert!(v["late_map"]["polygons"].as_u64().unwrap() >= 5, "{}", v["late_map"]);
+    assert!(v["late_map"]["after_s"].as_f64().unwrap() < 1.0, "{}", v["late_map"]);
+    assert!(v["late_markers"]["markers"].as_u64().unwrap() >= 5, "{}", v["late_markers"]);
+    assert!(v["late_markers"]["after_s"].as_f64().unwrap() < 1.0, "{}", v["late_markers"]);
+
+    // The services, from rospy and from rosservice.
+    assert!(v["get_map"]["treads"].as_u64().unwrap() >= 3, "{}", v["get_map"]);
+    assert_eq!(v["get_map"]["frame"], "map");
+    assert_eq!(v["get_foothold"]["found"], true, "{}", v["get_foothold"]);
+    let foothold = foothold.unwrap();
+    assert!(foothold.contains("found: True"), "rosservice call get_foothold: {foothold}");
+    let status_echo = status_echo.unwrap();
+    assert!(status_echo.contains("frames_processed:"), "rostopic echo status: {status_echo}");
+}
+
+/// SIGINT, as systemd or a user stops it; waits for the map to be saved.
+fn stop(child: &mut Child) {
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let deadline = Instant::now() + Duration::from_secs(15);
+    while Instant::now() < deadline {
+        if let Ok(Some(_)) = child.try_wait() {
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+}
+
+/// The MD5 sums polymap computes for every type it has a definition of equal genmsg's: the
+/// standard types' as rospy's installed classes carry them, polymap_msgs' and the terrain's
+/// as genpy generated them from the .msg files.
+#[test]
+fn md5_sums_equal_genmsgs_and_rospys() {
+    let types: Vec<&str> = polymap::ros1::types::known_types().collect();
+    let services = ["polymap_msgs/GetMap", "polymap_msgs/GetFoothold"];
+    let script = r#"
+import importlib, json, sys
+out = {}
+for name in sys.argv[1:]:
+    pkg, ty = name.split("/")
+    kind = "srv" if ty.startswith(("GetMap", "GetFoothold")) else "msg"
+    out[name] = getattr(importlib.import_module(f"{pkg}.{kind}"), ty)._md5sum
+print(json.dumps(out))
+"#;
+    let out = Command::new(PYTHON)
+        .current_dir(std::env::temp_dir())
+        .args(["-c", script])
+        .args(&types)
+        .args(services)
+        .env("PYTHONPATH", python_messages())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let theirs: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(types.len() >= 30, "{types:?}");
+    for t in &types {
+        assert_eq!(polymap::ros1::types::md5_of(t).unwrap(), theirs[t].as_str().unwrap(), "{t}");
+    }
+    for s in services {
+        assert_eq!(polymap::ros1::types::service_md5_of(s).unwrap(), theirs[s].as_str().unwrap(), "{s}");
+    }
+}
+
+/// The master's `[code, message, value]` answer to an XML-RPC call, by hand (no polymap code).
+fn master_call(uri: &str, body: &str) -> String {
+    let addr = uri.trim_start_matches("http://").trim_end_matches('/');
+    let mut s = TcpStream::connect(addr).unwrap();
+    write!(s, "POST / HTTP/1.0\r\nContent-Type: text/xml\r\nContent-Length: {}\r\n\r\n{body}", body.len()).unwrap();
+    let mut answer = String::new();
+    s.read_to_string(&mut answer).unwrap();
+    answer
+}
+
+/// polymap's TCPROS port and XML-RPC URI, from the master (lookupService, lookupNode).
+fn polymap_ports(core: &Roscore) -> (String, String) {
+    let call = |method: &str, arg: &str| {
+        master_call(
+            &core.uri,
+            &format!(
+                "<?xml version=\"1.0\"?><methodCall><methodName>{method}</methodName><params>\
+                 <param><value><string>/test</string></value></param><param><value><string>{arg}</string></value></param>\
+                 </params></methodCall>"
+            ),
+        )
+    };
+    let between = |text: &str, start: &str| {
+        let at = text.find(start).unwrap_or_else(|| panic!("{start} in {text}")) + start.len();
+        text[at..].split('<').next().unwrap().to_string()
+    };
+    let service = call("lookupService", "/polymap/get_map");
+    let tcpros = between(&service, "<string>rosrpc://");
+    assert!(tcpros.parse::<std::net::SocketAddr>().is_ok(), "a TCPROS address from {service}");
+    let node = call("lookupNode", "/polymap");
+    let api = format!("http://{}", between(&node, "<string>http://"));
+    (tcpros, api)
+}
+
+fn resident_kib(pid: u32) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap();
+    let line = status.lines().find(|l| l.starts_with("VmRSS:")).unwrap();
+    line.split_whitespace().nth(1).unwrap().parse().unwrap()
+}
+
+/// Raw TCPROS and XML-RPC peers that lie about lengths, stop half-way, send garbage or say
+/// nothing: each refused and counted, resident memory flat, and the node serves on.
+#[test]
+fn hostile_tcpros_and_xmlrpc_peers_are_refused_counted_and_do_not_grow_memory() {
+    let core = Roscore::start();
+    let dir = tempfile::tempdir().unwrap();
+    let mut polymap = mapper(&core, dir.path(), 60);
+    let log = dir.path().join("mapper.log");
+    wait_for_node(&core, "/polymap", &log);
+    std::thread::sleep(Duration::from_secs(3));
+    let (tcpros, api) = polymap_ports(&core);
+    let before = resident_kib(polymap.id());
+
+    let send = |bytes: &[u8], hold: Duration| {
+        let mut s = TcpStream::connect(&tcpros).unwrap();
+        let _ = s.write_all(bytes);
+        std::thread::sleep(hold);
+    };
+    // A connection header claiming 4 GiB, then more bytes as if it meant it.
+    let mut four_gib = 0xFFFF_FFF0u32.to_le_bytes().to_vec();
+    four_gib.extend(std::iter::repeat_n(b'x', 64 * 1024));
+    send(&four_gib, Duration::from_millis(500));
+    // A header cut short: 100 bytes promised, 10 sent, then the peer goes.
+    let mut truncated = 100u32.to_le_bytes().to_vec();
+    truncated.extend_from_slice(b"topic=/pol");
+    send(&truncated, Duration::ZERO);
+    // Garbage: a field longer than its header, then noise.
+    let mut garbage = 12u32.to_le_bytes().to_vec();
+    garbage.extend_from_slice(&0xFFFF_0000u32.to_le_bytes());
+    garbage.extend_from_slice(&[0xde, 0xad, 0xbe, 0xef, 1, 2, 3, 4]);
+    send(&garbage, Duration::from_millis(100));
+    // A subscriber with a valid header, then a frame of 3 GiB on a service connection.
+    let header = |fields: &[&str]| {
+        let mut body = Vec::new();
+        for f in fields {
+            body.extend_from_slice(&(f.len() as u32).to_le_bytes());
+            body.extend_from_slice(f.as_bytes());
+        }
+        let mut out = (body.len() as u32).to_le_bytes().to_vec();
+        out.extend(body);
+        out
+    };
+    let mut huge_request = header(&["callerid=/evil", "service=/polymap/get_map", "md5sum=*", "persistent=1"]);
+    huge_request.extend_from_slice(&0xC000_0000u32.to_le_bytes());
+    huge_request.extend(std::iter::repeat_n(0u8, 64 * 1024));
+    send(&huge_request, Duration::from_millis(500));
+    // A silent peer: says nothing past the handshake timeout.
+    let silent = std::thread::spawn({
+        let tcpros = tcpros.clone();
+        move || {
+            let _s = TcpStream::connect(&tcpros).unwrap();
+            std::thread::sleep(Duration::from_secs(7));
+        }
+    });
+    // XML-RPC: not XML, and a body claiming a gigabyte.
+    let addr = api.trim_start_matches("http://").trim_end_matches('/').to_string();
+    let mut s = TcpStream::connect(&addr).unwrap();
+    let _ = s.write_all(b"POST / HTTP/1.1\r\nContent-Length: 9\r\n\r\n\x00\xffnot xml");
+    let _ = s.read_to_end(&mut Vec::new());
+    let mut s = TcpStream::connect(&addr).unwrap();
+    let _ = s.write_all(b"POST / HTTP/1.1\r\nContent-Length: 1000000000\r\n\r\n<methodCall>");
+    let _ = s.read_to_end(&mut Vec::new());
+    silent.join().unwrap();
+
+    // The node serves on: a service call and a topic, through rospy's tools.
+    let answer = core.command("rosservice", &["call", "/polymap/get_foothold", "point: {x: 0.42, y: 0.0, z: 0.30}"]);
+    let status = core.command("rostopic", &["echo", "-n", "1", "/polymap/status"]).unwrap();
+    let after = resident_kib(polymap.id());
+    stop(&mut polymap);
+    let log_text = std::fs::read_to_string(&log).unwrap();
+    assert!(answer.unwrap().contains("foothold:"), "{log_text}");
+    let refused: u64 = status
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("requests_refused:"))
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or_else(|| panic!("requests_refused in {status}"));
+    assert!(refused >= 7, "refused {refused}:\n{log_text}");
+    for why in [
+        "over the 65536-byte limit",
+        "ends after",
+        "claims",
+        "over the 1048576-byte limit",
+        "no connection header within",
+    ] {
+        assert!(log_text.contains(why), "the log says {why:?}:\n{log_text}");
+    }
+    assert!(after < before + 16 * 1024, "resident memory grew from {before} KiB to {after} KiB");
+}
+
+/// The README's ROS 1 commands, one a line (the block after its `tests/ros1.rs` marker).
+fn readme_commands() -> Vec<String> {
+    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let marker = readme.find("<!-- tests/ros1.rs").expect("the README marks its ROS 1 commands");
+    let block = &readme[marker..];
+    let start = block.find("```sh\n").expect("a sh block after the marker") + 6;
+    let end = block[start..].find("```").unwrap();
+    block[start..start + end].lines().map(str::trim).filter(|l| !l.is_empty()).map(String::from).collect()
+}
+
+/// `polymap demo --ros1` against `roscore`, by the README's commands as written: the master
+/// on its default port, ROS 1's own tools, polymap_msgs built by catkin (the README's
+/// `source devel/setup.bash` is the PYTHONPATH here). `cargo run --release --` is this
+/// test build's binary.
+#[test]
+fn the_readme_s_ros1_commands_work_as_written() {
+    assert!(
+        std::net::TcpListener::bind("127.0.0.1:11311").is_ok(),
+        "port 11311 is in use here: the README's roscore listens there"
+    );
+    let lines = readme_commands();
+    assert_eq!(lines.len(), 4, "{lines:?}");
+    let home = tempfile::tempdir().unwrap();
+    let shell = |line: &str| {
+        let line = line.replace("cargo run --release --", env!("CARGO_BIN_EXE_polymap"));
+        let mut c = Command::new("bash");
+        c.args(["-c", line.trim_end_matches('&')])
+            .env_remove("ROS_MASTER_URI")
+            .env("ROS_HOME", home.path())
+            .env("PYTHONPATH", python_messages())
+            .current_dir(root());
+        c
+    };
+    struct Background(Vec<Child>);
+    impl Drop for Background {
+        fn drop(&mut self) {
+            // The demo, then roscore, as a user's Ctrl-C would.
+            for child in self.0.iter_mut().rev() {
+                stop(child);
+            }
+        }
+    }
+    let mut background = Background(Vec::new());
+    let mut outputs = Vec::new();
+    for line in &lines {
+        if line.ends_with('&') {
+            let log = std::fs::File::create(home.path().join(format!("bg{}.log", background.0.len()))).unwrap();
+            background.0.push(shell(line).stdout(log.try_clone().unwrap()).stderr(log).spawn().unwrap());
+            std::thread::sleep(Duration::from_secs(3));
+        } else {
+            let out = shell(&format!("timeout 90 {line}")).output().unwrap();
+            let logs: String = (0..background.0.len())
+                .map(|i| std::fs::read_to_string(home.path().join(format!("bg{i}.log"))).unwrap_or_default())
+                .collect();
+            assert!(
+                out.status.success(),
+                "{line}: {}{}\n{logs}",
+                String::from_utf8_lossy(&out.stdout),
+                String::from_utf8_lossy(&out.stderr)
+            );
+            outputs.push(String::from_utf8_lossy(&out.stdout).into_owned());
+        }
+    }
+    let (markers, foothold) = (&outputs[0], &outputs[1]);
+    assert!(markers.contains("ns: \"polygons_new\"") && markers.contains("points:"), "{markers}");
+    assert!(markers.contains("type: 4"), "line strips: {markers}");
+    assert!(foothold.contains("found: True"), "{foothold}");
+}
