@@ -64,9 +64,9 @@ fn simulate(seq: &Sequence, frames: &[(FramePolygons, Grid<f32>)], config: &Conf
     let mut mapper = FrameMapper::new(config, poses.clone(), map.clone(), counters.clone());
 
     let mut timing = PoseTiming::new(&vins, t0);
-    let mut next_pose = timing.next();
+    let mut next_pose = timing.next_pose();
     let mut propagated = vins.propagated().map(|p| PoseTiming::new(&p, t0));
-    let mut next_propagated = propagated.as_mut().map(|p| p.next());
+    let mut next_propagated = propagated.as_mut().map(|p| p.next_pose());
     let mut pose_stamps = Vec::new();
     let mut next_frame = clock.next_frame(t0, &stamps);
     let mut frame_stamps = Vec::new();
@@ -79,14 +79,14 @@ fn simulate(seq: &Sequence, frames: &[(FramePolygons, Grid<f32>)], config: &Conf
             let pose = truth.at(clock.sequence_time(stamp)).unwrap();
             poses.lock().push_at(&RawPose::from(&Pose { stamp_ns: stamp, transform: pose }), t).unwrap();
             pose_stamps.push(stamp);
-            next_pose = timing.next();
+            next_pose = timing.next_pose();
         }
         while let (Some(p), Some((stamp, at))) = (propagated.as_mut(), next_propagated)
             && at <= t
         {
             let pose = truth.at(clock.sequence_time(stamp)).unwrap();
             poses.lock().push_propagated_at(&RawPose::from(&Pose { stamp_ns: stamp, transform: pose }), t).unwrap();
-            next_propagated = Some(p.next());
+            next_propagated = Some(p.next_pose());
         }
         if next_frame.0 <= t && t <= t0 + RUN_MS * MS {
             frame_stamps.push(next_frame.0);

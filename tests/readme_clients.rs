@@ -6,23 +6,13 @@
 //! marker); `cargo run --release [--example X] --` becomes the binary this test build made,
 //! `python3` the virtualenv's python (POLYMAP_PYTHON, from scripts/test.sh).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-}
+mod common;
 
-/// The README's client commands, one a line.
-fn readme_commands() -> Vec<String> {
-    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
-    let marker = readme.find("<!-- tests/readme_clients.rs").expect("the README marks its client commands");
-    let block = &readme[marker..];
-    let start = block.find("```sh\n").expect("a sh block after the marker") + 6;
-    let end = block[start..].find("```").unwrap();
-    block[start..start + end].lines().map(str::trim).filter(|l| !l.is_empty()).map(String::from).collect()
-}
+use common::root;
 
 /// A README command as this test build runs it.
 fn command(line: &str) -> (Command, bool) {
@@ -74,7 +64,7 @@ fn the_readme_s_clients_reach_a_running_demo_and_print_the_map() {
         std::net::TcpListener::bind("127.0.0.1:7447").is_ok(),
         "port 7447 is in use here: the README's clients look for the demo there"
     );
-    let lines = readme_commands();
+    let lines = common::readme_commands("readme_clients.rs");
     assert_eq!(lines.len(), 3, "{lines:?}");
     let (mut demo_cmd, background) = command(&lines[0]);
     assert!(background && lines[0].contains(" demo"), "the demo runs in the background: {}", lines[0]);

@@ -16,9 +16,9 @@ use polymap::ros2::session::{free_loopback_port, loopback_json5};
 /// Debian's python, where rospy is.
 const PYTHON: &str = "/usr/bin/python3";
 
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-}
+mod common;
+
+use common::root;
 
 /// A `roscore` on a port of its own, stopped (SIGINT, as a user would) when dropped.
 struct Roscore {
@@ -173,6 +173,14 @@ fn mapper(core: &Roscore, dir: &Path, seconds: u32) -> Child {
     cmd.spawn().unwrap()
 }
 
+/// [`mapper`] for a minute, once the master lists it; and its log.
+fn registered_mapper(core: &Roscore, dir: &Path) -> (Child, std::path::PathBuf) {
+    let polymap = mapper(core, dir, 60);
+    let log = dir.join("mapper.log");
+    wait_for_node(core, "/polymap", &log);
+    (polymap, log)
+}
+
 /// Waits until the master lists `node`.
 fn wait_for_node(core: &Roscore, node: &str, log: &Path) {
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -190,9 +198,7 @@ fn wait_for_node(core: &Roscore, node: &str, log: &Path) {
 fn a_rospy_node_receives_every_topic_feeds_odometry_and_calls_the_services() {
     let core = Roscore::start();
     let dir = tempfile::tempdir().unwrap();
-    let mut polymap = mapper(&core, dir.path(), 60);
-    let log = dir.path().join("mapper.log");
-    wait_for_node(&core, "/polymap", &log);
+    let (mut polymap, log) = registered_mapper(&core, dir.path());
 
     // What a ROS 1 user sees of the node.
     let topics = core.command("rostopic", &["list"]).unwrap();
@@ -435,9 +441,7 @@ fn resident_kib(pid: u32) -> u64 {
 fn hostile_tcpros_and_xmlrpc_peers_are_refused_counted_and_do_not_grow_memory() {
     let core = Roscore::start();
     let dir = tempfile::tempdir().unwrap();
-    let mut polymap = mapper(&core, dir.path(), 60);
-    let log = dir.path().join("mapper.log");
-    wait_for_node(&core, "/polymap", &log);
+    let (mut polymap, log) = registered_mapper(&core, dir.path());
     std::thread::sleep(Duration::from_secs(3));
     let (tcpros, api) = polymap_ports(&core);
     let before = resident_kib(polymap.id());
@@ -518,16 +522,6 @@ fn hostile_tcpros_and_xmlrpc_peers_are_refused_counted_and_do_not_grow_memory() 
     assert!(after < before + 16 * 1024, "resident memory grew from {before} KiB to {after} KiB");
 }
 
-/// The README's ROS 1 commands, one a line (the block after its `tests/ros1.rs` marker).
-fn readme_commands() -> Vec<String> {
-    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
-    let marker = readme.find("<!-- tests/ros1.rs").expect("the README marks its ROS 1 commands");
-    let block = &readme[marker..];
-    let start = block.find("```sh\n").expect("a sh block after the marker") + 6;
-    let end = block[start..].find("```").unwrap();
-    block[start..start + end].lines().map(str::trim).filter(|l| !l.is_empty()).map(String::from).collect()
-}
-
 /// `polymap demo --ros1` against `roscore`, by the README's commands as written: the master
 /// on its default port, ROS 1's own tools, polymap_msgs built by catkin (the README's
 /// `source devel/setup.bash` is the PYTHONPATH here). `cargo run --release --` is this
@@ -538,7 +532,7 @@ fn the_readme_s_ros1_commands_work_as_written() {
         std::net::TcpListener::bind("127.0.0.1:11311").is_ok(),
         "port 11311 is in use here: the README's roscore listens there"
     );
-    let lines = readme_commands();
+    let lines = common::readme_commands("ros1.rs");
     assert_eq!(lines.len(), 4, "{lines:?}");
     let home = tempfile::tempdir().unwrap();
     let shell = |line: &str| {

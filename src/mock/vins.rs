@@ -175,7 +175,7 @@ async fn publish_timed<F: std::future::Future<Output = Result<()>>>(
 ) -> Result<u64> {
     let mut sent = 0u64;
     loop {
-        let (stamp, publish_at) = timing.next();
+        let (stamp, publish_at) = timing.next_pose();
         if duration.is_some_and(|d| publish_at.saturating_sub(started) >= d.as_nanos() as u64) {
             return Ok(sent);
         }
@@ -217,7 +217,7 @@ impl PoseTiming {
     }
 
     /// The next pose's stamp and publishing time.
-    pub fn next(&mut self) -> (StampNs, StampNs) {
+    pub fn next_pose(&mut self) -> (StampNs, StampNs) {
         use rand::RngExt;
         let j = self.jitter_ns;
         let mut jitter = || if j > 0.0 { self.rng.random_range(-j..j) } else { 0.0 };

@@ -19,6 +19,16 @@ pub fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// The README's commands in the `sh` block after its `<!-- tests/<file>` marker, one a line.
+pub fn readme_commands(test_file: &str) -> Vec<String> {
+    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let marker = readme.find(&format!("<!-- tests/{test_file}")).expect("the README marks the commands");
+    let block = &readme[marker..];
+    let start = block.find("```sh\n").expect("a sh block after the marker") + 6;
+    let end = block[start..].find("```").unwrap();
+    block[start..start + end].lines().map(str::trim).filter(|l| !l.is_empty()).map(String::from).collect()
+}
+
 pub fn json5(dir: &Path, name: &str, listen: Option<u16>, connect: &[u16]) -> String {
     let path = dir.join(format!("{name}.json5"));
     std::fs::write(&path, loopback_json5(listen, connect)).unwrap();
