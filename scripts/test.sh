@@ -18,13 +18,14 @@ need_debs() {
     DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 }
 need_debs mesa-vulkan-drivers libvulkan1 python3-venv pkg-config patchelf binutils libusb-1.0-0 libudev1
-# A real ROS 1 for tests/ros1.rs: Debian's ros_comm (Noetic's 1.15), genmsg/genpy, catkin
-# (which builds polymap_msgs as on a robot) and the common messages, with Debian's python3
+# A real ROS 1 for tests/ros1.rs: Debian's ros_comm (Noetic's 1.15), rosbag (its record and
+# play are roscpp programs), genmsg/genpy, catkin (which builds polymap_msgs as on a robot)
+# and the common messages, with Debian's python3
 # (rospy is not on PyPI).
 need_debs ros-core python3-rospy python3-rostopic python3-rosservice python3-rosnode python3-genmsg python3-genpy \
     ros-std-msgs ros-geometry-msgs ros-nav-msgs ros-sensor-msgs ros-visualization-msgs ros-tf2-msgs \
     python3-std-msgs python3-geometry-msgs python3-nav-msgs python3-sensor-msgs python3-visualization-msgs \
-    python3-tf2-msgs catkin ros-message-generation ros-message-runtime cmake g++
+    python3-tf2-msgs python3-rosbag catkin ros-message-generation ros-message-runtime cmake g++
 
 # The Python client test: eclipse-zenoh and rosbags from PyPI in a virtualenv of our own.
 venv=target/pyenv

@@ -580,3 +580,74 @@ fn the_readme_s_ros1_commands_work_as_written() {
     assert!(markers.contains("type: 4"), "line strips: {markers}");
     assert!(foothold.contains("found: True"), "{foothold}");
 }
+
+/// roscpp peers (Debian's C++ `rosbag`, linked against roscpp): `rosbag record` subscribes
+/// to polymap's topics and keeps them with the definitions polymap sent, from which rosbag's
+/// Python reader decodes them (polymap_msgs is not on its path); `rosbag play` publishes
+/// odometry that polymap decodes and refuses as not finite.
+#[test]
+fn roscpp_peers_record_polymap_s_topics_and_feed_it_odometry() {
+    let core = Roscore::start();
+    let dir = tempfile::tempdir().unwrap();
+    let (mut polymap, log) = registered_mapper(&core, dir.path());
+    let mut vins = Command::new(env!("CARGO_BIN_EXE_polymap"));
+    vins.args(["mock-vins", "--ros1", "--duration", "25"])
+        .arg(root().join("mock_frames/straight_320"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null());
+    core.env(&mut vins);
+    let mut vins = vins.spawn().unwrap();
+
+    let recorded = dir.path().join("recorded.bag");
+    let topics = ["/polygon_new_markers", "/polymap/map", "/polymap/frame_polygons", "/polymap/status", "/tf"];
+    let mut record = Command::new("rosbag");
+    record.args(["record", "--duration=10", "-O"]).arg(&recorded).args(topics).stdout(Stdio::null());
+    core.env(&mut record);
+    let record = record.spawn().expect("rosbag (scripts/test.sh installs python3-rosbag)");
+
+    let absurd = dir.path().join("absurd.bag");
+    let bags = |args: &[&std::ffi::OsStr]| {
+        let mut c = Command::new(PYTHON);
+        c.arg(root().join("tests/peer/ros1_bags.py")).args(args).current_dir(dir.path());
+        core.env(&mut c);
+        // rosbag's reader has only what the bag says of polymap_msgs.
+        c.env_remove("PYTHONPATH");
+        let out = c.output().unwrap();
+        assert!(out.status.success(), "ros1_bags.py {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    bags(&["write-absurd".as_ref(), absurd.as_os_str()]);
+    std::thread::sleep(Duration::from_secs(3));
+    // --delay: polymap connects to the new publisher before the messages go.
+    let played = core.command("rosbag", &["play", "--delay=2", absurd.to_str().unwrap()]);
+    let recorded_ok = record.wait_with_output().unwrap().status.success();
+    let _ = vins.kill();
+    let _ = vins.wait();
+    stop(&mut polymap);
+    let log_text = std::fs::read_to_string(&log).unwrap();
+    played.unwrap();
+    assert!(recorded_ok, "rosbag record failed");
+    assert!(
+        log_text.matches("pose on /vins_estimator/odometry refused").count() >= 5
+            && log_text.contains("non-finite position [NaN"),
+        "{log_text}"
+    );
+
+    let v: serde_json::Value = serde_json::from_str(bags(&["read".as_ref(), recorded.as_os_str()]).trim()).unwrap();
+    eprintln!("{v}");
+    for (topic, ty) in [
+        ("/polygon_new_markers", "visualization_msgs/MarkerArray"),
+        ("/polymap/map", "polymap_msgs/Map"),
+        ("/polymap/frame_polygons", "polymap_msgs/FramePolygons"),
+        ("/polymap/status", "polymap_msgs/Status"),
+        ("/tf", "tf2_msgs/TFMessage"),
+    ] {
+        assert_eq!(v["topics"][topic]["type"], ty, "{v}");
+        assert!(v["topics"][topic]["count"].as_u64().unwrap() >= 2, "{topic}: {v}");
+    }
+    assert!(v["map_polygons"].as_u64().unwrap() >= 5, "{v}");
+    // genpy made the class from polymap's definition in the bag (a module of its own).
+    assert!(v["map_class"].as_str().unwrap().starts_with("tmp"), "{v}");
+    assert!(v["marker_points"].as_u64().unwrap() >= 20, "{v}");
+    assert!(v["status_processed"].as_u64().unwrap() >= 10, "{v}");
+}
