@@ -54,6 +54,9 @@ pub enum DepthSourceKind {
     Realsense,
     /// A librealsense `.bag` recording (`bag` key), played once through the same driver.
     Bag,
+    /// A ROS image topic and its camera_info, where realsense-ros (or anything) owns the
+    /// camera: over ROS 2, and over ROS 1 when `[ros1]` is enabled.
+    Ros,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -72,6 +75,13 @@ pub struct DepthSourceConfig {
     pub fps: u32,
     /// L515 options; unset = the camera's own value.
     pub options: L515Options,
+    /// `kind = "ros"`: the depth image topic (sensor_msgs/Image, 16UC1, mono16 or 32FC1) and
+    /// its camera_info, as realsense-ros (ROS 1) names the L515's.
+    pub image_topic: RosName,
+    pub camera_info_topic: RosName,
+    /// Metres per unit of a 16-bit image; 0 = REP 118's millimetres. The L515's own unit
+    /// (0.00025) keeps its full resolution.
+    pub image_unit_m: f64,
 }
 
 /// The options polymap sets, each named as librealsense names it (`rs2_option_to_string`,
@@ -233,6 +243,9 @@ impl Default for DepthSourceConfig {
             height: 240,
             fps: 30,
             options: L515Options::default(),
+            image_topic: RosName::parse("/l515/depth/image_rect_raw").expect("a valid name"),
+            camera_info_topic: RosName::parse("/l515/depth/camera_info").expect("a valid name"),
+            image_unit_m: 0.0,
         }
     }
 }
@@ -683,6 +696,9 @@ impl Config {
         check_range("sources.depth.width", d.width as f64, 16.0, 4096.0)?;
         check_range("sources.depth.height", d.height as f64, 16.0, 4096.0)?;
         check_range("sources.depth.fps", d.fps as f64, 1.0, 1000.0)?;
+        if d.image_unit_m != 0.0 {
+            check_range("sources.depth.image_unit_m", d.image_unit_m, 1e-6, 1.0)?;
+        }
         let i = &self.sources.d435i;
         check_range("sources.d435i.ir_width", i.ir_width as f64, 16.0, 4096.0)?;
         check_range("sources.d435i.ir_height", i.ir_height as f64, 16.0, 4096.0)?;

@@ -148,18 +148,24 @@ fn python_messages() -> String {
     .clone()
 }
 
-/// `polymap run` with `[ros1] enabled` on the bundled mock stairs (mock camera at 8 Hz,
-/// mock D435i), ROS 2 on a Zenoh port of its own; its log in `dir/mapper.log`.
-fn mapper(core: &Roscore, dir: &Path, seconds: u32) -> Child {
+/// The mapper's sources: the bundled mock stairs at 8 Hz and the mock D435i.
+fn mock_sources() -> String {
+    format!(
+        "[sources.depth]\nsequence = {:?}\nfps = 8\n[sources.d435i]\nkind = \"mock\"\nir_width = 320\nir_height = 240\n",
+        root().join("mock_frames/straight_320").display().to_string()
+    )
+}
+
+/// `polymap run` with `[ros1] enabled`, `sources` (TOML), the CPU twin, ROS 2 on a Zenoh
+/// port of its own; its log in `dir/mapper.log`.
+fn mapper(core: &Roscore, dir: &Path, seconds: u32, sources: &str) -> Child {
     let zenoh = dir.join("mapper.json5");
     std::fs::write(&zenoh, loopback_json5(Some(free_loopback_port().unwrap()), &[])).unwrap();
     let config = dir.join("mapper.toml");
     std::fs::write(
         &config,
         format!(
-            "[sources.depth]\nsequence = {:?}\nfps = 8\n[sources.d435i]\nkind = \"mock\"\nir_width = 320\nir_height = 240\n\
-             [pipeline]\nbackend = \"cpu\"\n[zenoh]\nconfig_file = {:?}\n[ros1]\nenabled = true\n",
-            root().join("mock_frames/straight_320").display().to_string(),
+            "{sources}[pipeline]\nbackend = \"cpu\"\n[zenoh]\nconfig_file = {:?}\n[ros1]\nenabled = true\n",
             zenoh.display().to_string(),
         ),
     )
@@ -173,9 +179,9 @@ fn mapper(core: &Roscore, dir: &Path, seconds: u32) -> Child {
     cmd.spawn().unwrap()
 }
 
-/// [`mapper`] for a minute, once the master lists it; and its log.
-fn registered_mapper(core: &Roscore, dir: &Path) -> (Child, std::path::PathBuf) {
-    let polymap = mapper(core, dir, 60);
+/// [`mapper`] on `sources` for a minute, once the master lists it; and its log.
+fn registered_mapper(core: &Roscore, dir: &Path, sources: &str) -> (Child, std::path::PathBuf) {
+    let polymap = mapper(core, dir, 60, sources);
     let log = dir.join("mapper.log");
     wait_for_node(core, "/polymap", &log);
     (polymap, log)
@@ -198,7 +204,7 @@ fn wait_for_node(core: &Roscore, node: &str, log: &Path) {
 fn a_rospy_node_receives_every_topic_feeds_odometry_and_calls_the_services() {
     let core = Roscore::start();
     let dir = tempfile::tempdir().unwrap();
-    let (mut polymap, log) = registered_mapper(&core, dir.path());
+    let (mut polymap, log) = registered_mapper(&core, dir.path(), &mock_sources());
 
     // What a ROS 1 user sees of the node.
     let topics = core.command("rostopic", &["list"]).unwrap();
@@ -441,7 +447,7 @@ fn resident_kib(pid: u32) -> u64 {
 fn hostile_tcpros_and_xmlrpc_peers_are_refused_counted_and_do_not_grow_memory() {
     let core = Roscore::start();
     let dir = tempfile::tempdir().unwrap();
-    let (mut polymap, log) = registered_mapper(&core, dir.path());
+    let (mut polymap, log) = registered_mapper(&core, dir.path(), &mock_sources());
     std::thread::sleep(Duration::from_secs(3));
     let (tcpros, api) = polymap_ports(&core);
     let before = resident_kib(polymap.id());
@@ -589,7 +595,7 @@ fn the_readme_s_ros1_commands_work_as_written() {
 fn roscpp_peers_record_polymap_s_topics_and_feed_it_odometry() {
     let core = Roscore::start();
     let dir = tempfile::tempdir().unwrap();
-    let (mut polymap, log) = registered_mapper(&core, dir.path());
+    let (mut polymap, log) = registered_mapper(&core, dir.path(), &mock_sources());
     let mut vins = Command::new(env!("CARGO_BIN_EXE_polymap"));
     vins.args(["mock-vins", "--ros1", "--duration", "25"])
         .arg(root().join("mock_frames/straight_320"))
@@ -650,4 +656,69 @@ fn roscpp_peers_record_polymap_s_topics_and_feed_it_odometry() {
     assert!(v["map_class"].as_str().unwrap().starts_with("tmp"), "{v}");
     assert!(v["marker_points"].as_u64().unwrap() >= 20, "{v}");
     assert!(v["status_processed"].as_u64().unwrap() >= 10, "{v}");
+}
+
+/// Depth from a ROS image topic (`sources.depth.kind = "ros"`), published by a rospy node as
+/// realsense-ros publishes the L515's, with VINS's poses: every frame polymap maps has the
+/// polygons the same frame of the sequence gives offline, to the micrometre; an RGB image and
+/// one that does not fit its camera_info are refused and counted.
+#[test]
+fn depth_from_a_ros_topic_gives_the_sequence_s_polygons_frame_by_frame() {
+    let core = Roscore::start();
+    let dir = tempfile::tempdir().unwrap();
+    let seq_dir = root().join("mock_frames/straight_320");
+    let seq = polymap::sequence::Sequence::open(&seq_dir).unwrap();
+    let sources = format!(
+        "[sources.depth]\nkind = \"ros\"\nimage_unit_m = {}\n[sources.d435i]\nkind = \"none\"\n",
+        seq.intrinsics.depth_scale
+    );
+    let (mut polymap, log) = registered_mapper(&core, dir.path(), &sources);
+    let mut peer = Command::new(PYTHON);
+    peer.arg(root().join("tests/peer/ros1_depth.py")).arg("--sequence").arg(&seq_dir);
+    core.env(&mut peer);
+    let out = peer.output().unwrap();
+    let status = core.command("rostopic", &["echo", "-n", "1", "/polymap/status"]);
+    stop(&mut polymap);
+    let log_text = std::fs::read_to_string(&log).unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "peer: {stdout}\n{}\n{log_text}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    let frames = v["frames"].as_array().unwrap();
+    eprintln!("{} of {} frames sent were mapped", frames.len(), v["sent"]);
+    assert!(frames.len() >= 15, "{} of {} frames mapped:\n{log_text}", frames.len(), v["sent"]);
+
+    let config = polymap::config::Config::default();
+    let mut extractor = polymap::extract::Extractor::new(&polymap::config::PipelineConfig {
+        backend: polymap::config::Backend::Cpu,
+        ..config.pipeline.clone()
+    })
+    .unwrap();
+    let mut worst = 0.0f64;
+    let mut polygons = 0;
+    for f in frames {
+        let k = f["k"].as_u64().unwrap() as usize;
+        let drift = f["drift_z"].as_f64().expect("the frame's map update");
+        let (extracted, _, _) = extractor.extract(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
+        let t = nalgebra::Translation3::new(0.0, 0.0, -drift) * seq.poses[k].transform;
+        let offline: Vec<_> = extracted.polygons.iter().map(|p| p.transformed(&t)).collect();
+        let offline = polymap::interface::convert::frame_polygons(0, "map", &offline);
+        let live = f["polygons"].as_array().unwrap();
+        assert_eq!(live.len(), offline.polygons.len(), "frame {k}: polygons live and offline");
+        for (l, o) in live.iter().zip(&offline.polygons) {
+            let l = l.as_array().unwrap();
+            assert_eq!(l.len(), o.boundary.len(), "frame {k}: outline lengths");
+            for (a, b) in l.iter().zip(&o.boundary) {
+                let a: Vec<f64> = a.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+                worst = worst.max((a[0] - b.x).abs()).max((a[1] - b.y).abs()).max((a[2] - b.z).abs());
+            }
+        }
+        polygons += live.len();
+    }
+    eprintln!("{polygons} polygons in {} frames: worst vertex difference {worst:.2e} m", frames.len());
+    assert!(polygons >= 3 * frames.len(), "{polygons} polygons");
+    assert!(worst < 1e-6, "a vertex {worst} m off");
+    assert!(log_text.contains("encoding \"rgb8\" is not a depth image"), "{log_text}");
+    assert!(log_text.contains("but its camera_info says"), "{log_text}");
+    let status = status.unwrap();
+    assert!(status.contains("frames_not_extracted: 2"), "{status}");
 }

@@ -8,7 +8,7 @@ use crate::ros2::msg::{
     Pose, PoseStamped, PoseWithCovariance, Quaternion, Ring, TfMessage, Time, Transform, TransformStamped,
     TwistWithCovariance, Vector3,
 };
-use crate::types::{Intrinsics, StampNs};
+use crate::types::{DepthFrame, Intrinsics, StampNs};
 
 fn ring(r: &[[f64; 3]]) -> Ring {
     Ring { points: r.iter().map(|&p| p.into()).collect() }
@@ -311,6 +311,74 @@ pub fn drift_transform(stamp_ns: StampNs, map_frame: &str, odometry_frame: &str,
                 rotation: Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 },
             },
         }],
+    }
+}
+
+// Depth from a ROS image topic, as realsense-ros publishes the L515's.
+
+/// The unit polymap keeps a 32FC1 image's metres in: the L515's, 0.25 mm.
+const FLOAT_DEPTH_UNIT_M: f64 = 0.00025;
+
+/// A depth image and its camera_info as a frame: 16UC1 / mono16 in `unit_m` (None: REP 118's
+/// millimetres), or 32FC1 in metres (kept in 0.25 mm units; NaN, inf and <= 0 are invalid).
+/// Why not, when the image is not a depth image or does not fit its camera_info.
+pub fn depth_frame(
+    image: &Image,
+    info: &msg::CameraInfo,
+    unit_m: Option<f64>,
+) -> Result<(DepthFrame, Intrinsics), String> {
+    let (w, h) = (image.width as usize, image.height as usize);
+    if (image.width, image.height) != (info.width, info.height) {
+        return Err(format!(
+            "the image is {}x{} but its camera_info says {}x{}",
+            image.width, image.height, info.width, info.height
+        ));
+    }
+    if w == 0 || h == 0 || w > 4096 || h > 4096 {
+        return Err(format!("an image of {w}x{h} pixels"));
+    }
+    let bytes_per_pixel = match image.encoding.as_str() {
+        "16UC1" | "mono16" => 2,
+        "32FC1" => 4,
+        other => return Err(format!("encoding {other:?} is not a depth image (16UC1, mono16 or 32FC1)")),
+    };
+    let step = image.step as usize;
+    if step < w * bytes_per_pixel || image.data.len() < step * h {
+        return Err(format!(
+            "{} bytes with a step of {step} do not hold {w}x{h} pixels of {bytes_per_pixel} bytes",
+            image.data.len()
+        ));
+    }
+    let k = &info.k;
+    if !(k[0] > 0.0 && k[4] > 0.0 && k.iter().all(|v| v.is_finite())) {
+        return Err(format!("camera_info's K {k:?} has no focal lengths"));
+    }
+    let big = image.is_bigendian != 0;
+    let mut pixels = Vec::with_capacity(w * h);
+    for row in image.data.chunks(step).take(h) {
+        for px in row[..w * bytes_per_pixel].chunks_exact(bytes_per_pixel) {
+            pixels.push(match (bytes_per_pixel, big) {
+                (2, false) => u16::from_le_bytes([px[0], px[1]]),
+                (2, true) => u16::from_be_bytes([px[0], px[1]]),
+                (_, false) => metres_to_units(f32::from_le_bytes([px[0], px[1], px[2], px[3]])),
+                (_, true) => metres_to_units(f32::from_be_bytes([px[0], px[1], px[2], px[3]])),
+            });
+        }
+    }
+    let depth_scale = match bytes_per_pixel {
+        2 => unit_m.unwrap_or(0.001),
+        _ => FLOAT_DEPTH_UNIT_M,
+    };
+    let intrinsics =
+        Intrinsics { width: image.width, height: image.height, fx: k[0], fy: k[4], cx: k[2], cy: k[5], depth_scale };
+    let stamp_ns = image.header.stamp.to_ns().ok_or_else(|| format!("stamp {:?}", image.header.stamp))?;
+    Ok((DepthFrame { stamp_ns, width: image.width, height: image.height, depth_scale, pixels }, intrinsics))
+}
+
+fn metres_to_units(m: f32) -> u16 {
+    match m.is_finite() && m > 0.0 {
+        true => (m as f64 / FLOAT_DEPTH_UNIT_M).round().min(u16::MAX as f64) as u16,
+        false => 0,
     }
 }
 

@@ -14,7 +14,8 @@ use crate::ros2::msg::{
 };
 use crate::ros2::{Qos, RosName, Service, Topic};
 
-/// The IR stream of infra1 or infra2, as realsense-ros names it.
+/// A camera stream: its images and their camera_info (the D435i's infra1 or infra2, the
+/// L515's depth), as realsense-ros names them.
 #[derive(Clone, Debug)]
 pub struct InfraTopics {
     pub image: Topic<Image>,
@@ -58,6 +59,8 @@ pub struct Interface {
     /// The D435i's streams for VINS, under realsense-ros's names (`/camera/camera/...`).
     pub infra: [InfraTopics; 2],
     pub imu: Topic<Imu>,
+    /// `sources.depth.kind = "ros"`: the depth image and its camera_info, on either layer.
+    pub depth: InfraTopics,
     /// ROS 1: each frame's polygons as the paper authors' node sends them
     /// (`/polygon_new_markers`), when configured.
     pub polygon_markers: Option<Topic<MarkerArray>>,
@@ -140,6 +143,10 @@ impl Interface {
             imu: Topic::new(cam("imu"), Qos::reliable(400)),
             // The authors' markers live 0.5 s: only the newest frame's matter.
             polygon_markers: names.polygon_markers.map(|name| Topic::new(name.clone(), Qos::reliable(2))),
+            depth: InfraTopics {
+                image: Topic::new(config.sources.depth.image_topic.clone(), Qos::reliable(2)),
+                camera_info: Topic::new(config.sources.depth.camera_info_topic.clone(), Qos::reliable(2)),
+            },
         }
     }
 

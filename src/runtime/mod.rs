@@ -75,7 +75,7 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
         counters: counters.clone(),
     };
     let worker = worker::spawn(config, shared, events_tx)?;
-    let camera = sources::start_depth(config, seq.as_ref(), slot, stop.clone(), counters.clone()).await?;
+    let camera = sources::start_depth(config, seq.as_ref(), &wires, slot, stop.clone(), counters.clone()).await?;
     let d435i = sources::start_d435i(config, seq.as_ref(), &wires, stop.clone()).await?;
     // This run's epoch: versions count from the snapshot's within it, and a client seeing a
     // new one knows the mapper restarted.

@@ -20,7 +20,7 @@ use crate::sequence::Sequence;
 pub fn mock_sequence(config: &Config) -> Result<Option<Sequence>> {
     match config.sources.depth.kind {
         DepthSourceKind::Mock => Ok(Some(Sequence::open(&config.sources.depth.sequence)?)),
-        DepthSourceKind::Realsense | DepthSourceKind::Bag => Ok(None),
+        DepthSourceKind::Realsense | DepthSourceKind::Bag | DepthSourceKind::Ros => Ok(None),
         DepthSourceKind::Sequence => bail!(
             "sources.depth.kind = \"sequence\" is for offline work (polymap replay); live needs mock, realsense or bag"
         ),
@@ -31,14 +31,79 @@ pub fn mock_sequence(config: &Config) -> Result<Option<Sequence>> {
 pub async fn start_depth(
     config: &Config,
     seq: Option<&Sequence>,
+    wires: &Wires,
     slot: Arc<Slot>,
     stop: Arc<AtomicBool>,
     counters: Arc<Counters>,
 ) -> Result<tokio::task::JoinHandle<()>> {
-    match seq {
-        Some(seq) => crate::mock::depth::spawn(seq, config.sources.depth.fps, stop, move |f| slot.offer(f, &counters)),
-        None => realsense_depth(&config.sources.depth, slot, stop, counters).await,
+    match (seq, config.sources.depth.kind) {
+        (Some(seq), _) => {
+            crate::mock::depth::spawn(seq, config.sources.depth.fps, stop, move |f| slot.offer(f, &counters))
+        }
+        (None, DepthSourceKind::Ros) => ros_depth(config, wires, slot, counters).await,
+        (None, _) => realsense_depth(&config.sources.depth, slot, stop, counters).await,
     }
+}
+
+/// Depth from a ROS image topic, paired with the newest camera_info. An image that is not a
+/// depth image or does not fit its camera_info is refused, logged and counted as a frame
+/// not extracted; one before any camera_info waits for it (logged once).
+async fn ros_depth(
+    config: &Config,
+    wires: &Wires,
+    slot: Arc<Slot>,
+    counters: Arc<Counters>,
+) -> Result<tokio::task::JoinHandle<()>> {
+    use std::sync::atomic::Ordering;
+
+    use parking_lot::Mutex;
+
+    let info: Arc<Mutex<Option<CameraInfo>>> = Arc::default();
+    let newest = info.clone();
+    let mut held = wires
+        .subscribe(
+            |i| Some(&i.depth.camera_info),
+            move |topic, m| match m {
+                Ok(m) => *newest.lock() = Some(m),
+                Err(e) => tracing::warn!("{topic}: not a camera_info: {e}"),
+            },
+        )
+        .await?;
+    let unit_m = Some(config.sources.depth.image_unit_m).filter(|&u| u > 0.0);
+    let waiting_said = AtomicBool::new(false);
+    held.extend(
+        wires
+            .subscribe(
+                |i| Some(&i.depth.image),
+                move |topic, m| {
+                    let frame = m.map_err(|e| e.to_string()).and_then(|image| match &*info.lock() {
+                        Some(info) => convert::depth_frame(&image, info, unit_m).map(Some),
+                        None => Ok(None),
+                    });
+                    match frame {
+                        Ok(Some(frame)) => slot.offer(frame, &counters),
+                        Ok(None) => {
+                            if !waiting_said.swap(true, Ordering::Relaxed) {
+                                tracing::info!("{topic}: waiting for its camera_info");
+                            }
+                        }
+                        Err(why) => {
+                            let n = counters.extraction_failed.fetch_add(1, Ordering::Relaxed) + 1;
+                            if n <= 10 || n.is_multiple_of(1000) {
+                                tracing::warn!("{topic}: image refused ({n} so far): {why}");
+                            }
+                        }
+                    }
+                },
+            )
+            .await?,
+    );
+    tracing::info!("depth from {} and {}", config.sources.depth.image_topic, config.sources.depth.camera_info_topic);
+    // The subscriptions live as long as this task.
+    Ok(tokio::spawn(async move {
+        let _held = held;
+        std::future::pending::<()>().await
+    }))
 }
 
 /// The L515 (or a bag) on a thread of its own. Opened here, so a missing camera stops
