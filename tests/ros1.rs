@@ -502,6 +502,12 @@ fn hostile_tcpros_and_xmlrpc_peers_are_refused_counted_and_do_not_grow_memory() 
     let _ = s.write_all(b"POST / HTTP/1.1\r\nContent-Length: 1000000000\r\n\r\n<methodCall>");
     let _ = s.read_to_end(&mut Vec::new());
     silent.join().unwrap();
+    // A crowd: 300 connections at once, saying nothing. Those over the cap are closed at
+    // once; the rest time out; then the node serves again.
+    let crowd: Vec<TcpStream> = (0..300).filter_map(|_| TcpStream::connect(&tcpros).ok()).collect();
+    std::thread::sleep(Duration::from_secs(1));
+    drop(crowd);
+    std::thread::sleep(Duration::from_secs(6));
 
     // The node serves on: a service call and a topic, through rospy's tools.
     let answer = core.command("rosservice", &["call", "/polymap/get_foothold", "point: {x: 0.42, y: 0.0, z: 0.30}"]);

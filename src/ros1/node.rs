@@ -10,6 +10,7 @@
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::Duration;
 
 use parking_lot::Mutex;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -48,6 +49,8 @@ struct Inner {
     refused: AtomicU64,
     shut_down: AtomicBool,
     next_connection: AtomicU64,
+    /// Permits for peer connections open at once.
+    peers: Arc<tokio::sync::Semaphore>,
 }
 
 struct Publication {
@@ -103,6 +106,7 @@ impl Node {
             refused: AtomicU64::new(0),
             shut_down: AtomicBool::new(false),
             next_connection: AtomicU64::new(1),
+            peers: Arc::new(tokio::sync::Semaphore::new(MAX_PEERS)),
         });
         // As roscpp does: wait for the master (a robot's services start in any order).
         let mut waited = 0u64;
@@ -111,7 +115,7 @@ impl Node {
                 tracing::warn!("waiting for the ROS 1 master (is roscore running?): {e}");
             }
             waited += 1;
-            tokio::time::sleep(std::time::Duration::from_millis(500)).await;
+            tokio::time::sleep(Duration::from_millis(500)).await;
         }
         let tasks = vec![
             tokio::spawn(serve_xmlrpc(inner.clone(), xmlrpc_listener)).abort_handle(),
@@ -429,84 +433,124 @@ fn connect_publishers(inner: &Arc<Inner>, s: &Arc<Subscribed>, publishers: &[Str
     }
 }
 
-/// Subscribes to one publisher of `s`'s topic until it goes or breaks the protocol.
+/// Subscribes to one publisher of `s`'s topic for as long as the master lists it (a
+/// publisherUpdate without it aborts this task): a connection that fails or breaks off is
+/// made again, after 1 s doubling to 8 s, as roscpp does.
 async fn take_from(inner: Arc<Inner>, s: Arc<Subscribed>, uri: String) {
-    let result: Result<(), Ros1Error> = async {
-        let answer = xmlrpc::call(
-            &uri,
-            "requestTopic",
-            &[
-                inner.opts.name.as_str().into(),
-                s.topic.as_str().into(),
-                Value::Array(vec![Value::Array(vec!["TCPROS".into()])]),
-            ],
-        )
-        .await?;
-        let (host, port) = match answer.as_array() {
-            Some([code, _, Value::Array(p)]) if code.as_int() == Some(1) => match p.as_slice() {
-                [proto, host, port] if proto.as_str() == Some("TCPROS") => {
-                    (host.as_str().unwrap_or_default().to_string(), port.as_int().unwrap_or_default())
-                }
-                _ => return Err(Ros1Error::Peer(format!("{uri} offers no TCPROS for {}", s.topic))),
-            },
-            _ => return Err(Ros1Error::Peer(format!("{uri} answered requestTopic with {answer:?}"))),
-        };
-        let port = u16::try_from(port).map_err(|_| Ros1Error::Peer(format!("{uri}: port {port}")))?;
-        let mut stream = TcpStream::connect((host.as_str(), port)).await?;
-        stream.set_nodelay(true)?;
-        let header = ConnectionHeader::new(&[
-            ("callerid", &inner.opts.name),
-            ("topic", &s.topic),
-            ("md5sum", &s.info.md5),
-            ("type", s.info.name),
-            ("message_definition", &s.info.definition),
-            ("tcp_nodelay", "1"),
-        ]);
-        tcpros::write_header(&mut stream, &header).await?;
-        let theirs = tcpros::read_header(&mut stream).await?;
-        if let Some(error) = theirs.get("error") {
-            return Err(TcprosError::Refused(error.to_string()).into());
-        }
-        loop {
-            let frame = tcpros::read_frame(&mut stream, "a message", s.limit).await?;
-            (s.on)(&frame);
-        }
-    }
-    .await;
-    if let Err(e) = result {
-        match &e {
-            Ros1Error::Tcpros(TcprosError::Io(io)) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
-                tracing::info!("ROS 1: {uri} stopped publishing {}", s.topic)
+    let mut backoff = Duration::from_secs(1);
+    loop {
+        let mut received = 0u64;
+        let ended = stream_from(&inner, &s, &uri, &mut received).await;
+        match &ended {
+            Err(Ros1Error::Tcpros(TcprosError::Io(_)) | Ros1Error::XmlRpc(_) | Ros1Error::Io(_)) => {
+                tracing::info!("ROS 1: {uri} stopped sending {} ({ended:?}); trying again", s.topic)
             }
-            _ => inner.refuse(&format!("the publisher {uri} of {}", s.topic), &e),
+            Err(e) => inner.refuse(&format!("the publisher {uri} of {}", s.topic), e),
+            Ok(()) => {}
+        }
+        if received > 0 {
+            backoff = Duration::from_secs(1);
+        }
+        tokio::time::sleep(backoff).await;
+        backoff = (backoff * 2).min(Duration::from_secs(8));
+    }
+}
+
+/// One connection to a publisher: the handshake, then each message to the subscription
+/// until the connection ends.
+async fn stream_from(inner: &Inner, s: &Subscribed, uri: &str, received: &mut u64) -> Result<(), Ros1Error> {
+    let answer = xmlrpc::call(
+        uri,
+        "requestTopic",
+        &[
+            inner.opts.name.as_str().into(),
+            s.topic.as_str().into(),
+            Value::Array(vec![Value::Array(vec!["TCPROS".into()])]),
+        ],
+    )
+    .await?;
+    let (host, port) = match answer.as_array() {
+        Some([code, _, Value::Array(p)]) if code.as_int() == Some(1) => match p.as_slice() {
+            [proto, host, port] if proto.as_str() == Some("TCPROS") => {
+                (host.as_str().unwrap_or_default().to_string(), port.as_int().unwrap_or_default())
+            }
+            _ => return Err(Ros1Error::Peer(format!("{uri} offers no TCPROS for {}", s.topic))),
+        },
+        _ => return Err(Ros1Error::Peer(format!("{uri} answered requestTopic with {answer:?}"))),
+    };
+    let port = u16::try_from(port).map_err(|_| Ros1Error::Peer(format!("{uri}: port {port}")))?;
+    let mut stream = TcpStream::connect((host.as_str(), port)).await?;
+    stream.set_nodelay(true)?;
+    let header = ConnectionHeader::new(&[
+        ("callerid", &inner.opts.name),
+        ("topic", &s.topic),
+        ("md5sum", &s.info.md5),
+        ("type", s.info.name),
+        ("message_definition", &s.info.definition),
+        ("tcp_nodelay", "1"),
+    ]);
+    tcpros::write_header(&mut stream, &header).await?;
+    let theirs = tcpros::read_header(&mut stream).await?;
+    if let Some(error) = theirs.get("error") {
+        return Err(TcprosError::Refused(error.to_string()).into());
+    }
+    loop {
+        let frame = tcpros::read_frame(&mut stream, "a message", s.limit).await?;
+        *received += 1;
+        (s.on)(&frame);
+    }
+}
+
+/// Peer connections served at once, XML-RPC and TCPROS together; one more is closed at once
+/// and counted.
+const MAX_PEERS: usize = 256;
+
+/// Accepts `listener`'s connections, each served by `serve` on a task of its own while
+/// fewer than [`MAX_PEERS`] are open.
+async fn accept<F, Fut>(inner: Arc<Inner>, listener: TcpListener, what: &'static str, serve: F)
+where
+    F: Fn(Arc<Inner>, TcpStream, std::net::SocketAddr) -> Fut,
+    Fut: std::future::Future<Output = ()> + Send + 'static,
+{
+    loop {
+        let (stream, peer) = match listener.accept().await {
+            Ok(accepted) => accepted,
+            // Out of file descriptors, most likely: wait rather than spin.
+            Err(e) => {
+                tracing::warn!("ROS 1: accepting {what}: {e}");
+                tokio::time::sleep(Duration::from_millis(100)).await;
+                continue;
+            }
+        };
+        match inner.peers.clone().try_acquire_owned() {
+            Ok(permit) => {
+                let served = serve(inner.clone(), stream, peer);
+                tokio::spawn(async move {
+                    served.await;
+                    drop(permit);
+                });
+            }
+            Err(_) => inner.refuse(&format!("{what} from {peer}"), &format!("over {MAX_PEERS} peers at once")),
         }
     }
-    s.publishers.lock().remove(&uri);
 }
 
 async fn serve_xmlrpc(inner: Arc<Inner>, listener: TcpListener) {
-    loop {
-        let Ok((stream, _)) = listener.accept().await else { continue };
-        let inner = inner.clone();
-        tokio::spawn(async move {
-            let served = xmlrpc::serve_one(stream, |method, params| inner.slave(method, params)).await;
-            if let Err(e) = served {
-                inner.refuse("an XML-RPC call", &e);
-            }
-        });
-    }
+    accept(inner, listener, "an XML-RPC call", |inner, stream, _| async move {
+        if let Err(e) = xmlrpc::serve_one(stream, |method, params| inner.slave(method, params)).await {
+            inner.refuse("an XML-RPC call", &e);
+        }
+    })
+    .await
 }
 
 async fn serve_tcpros(inner: Arc<Inner>, listener: TcpListener) {
-    loop {
-        let Ok((stream, peer)) = listener.accept().await else { continue };
-        let inner = inner.clone();
-        tokio::spawn(async move {
-            if let Err(e) = connection(&inner, stream).await {
-                inner.refuse(&format!("a TCPROS connection from {peer}"), &e);
-            }
-        });
-    }
+    accept(inner, listener, "a TCPROS connection", |inner, stream, peer| async move {
+        if let Err(e) = connection(&inner, stream).await {
+            inner.refuse(&format!("a TCPROS connection from {peer}"), &e);
+        }
+    })
+    .await
 }
 
 /// One peer's TCPROS connection: a subscriber of a topic or a caller of a service.
