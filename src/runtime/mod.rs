@@ -181,10 +181,14 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
     if worker_ended {
         tracing::warn!("the extractor thread stopped by itself");
     }
-    if let Some((node, _)) = &wires.ros1 {
-        node.shutdown().await;
-    }
     save_snapshot(&map, config).await.context("saving the map at shutdown")?;
+    // Unregistered so the master stops naming polymap to peers; a master that does not answer
+    // must not hold up the exit (systemd gives a stop 10 s).
+    if let Some((node, _)) = &wires.ros1
+        && tokio::time::timeout(Duration::from_secs(2), node.shutdown()).await.is_err()
+    {
+        tracing::warn!("ROS 1: the master did not take the unregistrations within 2 s");
+    }
     Ok(report(&all_latencies))
 }
 
