@@ -21,6 +21,7 @@ pub mod files;
 pub mod fuzz;
 pub mod grid;
 pub mod interface;
+pub mod logs;
 pub mod map;
 pub mod mock;
 pub mod pose;

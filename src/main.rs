@@ -120,9 +120,19 @@ enum Command {
         #[arg(long)]
         threads: Option<usize>,
     },
-    /// Map a whole sequence (extraction + global polygon map) and write the map and its picture
+    /// Map a whole sequence, or a ROS 1 bag (FILE.bag: depth images, their camera_info and
+    /// VINS's odometry), and write the map and its picture
     Replay {
         seq: PathBuf,
+        /// A bag's depth images (sensor_msgs/Image: 16UC1 in mm, or sources.depth.image_unit_m; 32FC1 in m)
+        #[arg(long, default_value_t = polymap::logs::LogTopics::ros1().depth)]
+        depth_topic: String,
+        /// A bag's camera_info for those images
+        #[arg(long, default_value_t = polymap::logs::LogTopics::ros1().camera_info)]
+        camera_info_topic: String,
+        /// A bag's odometry (nav_msgs/Odometry): each image's pose, interpolated at its stamp
+        #[arg(long, default_value_t = polymap::logs::LogTopics::ros1().odometry)]
+        odometry_topic: String,
         /// Write the map's JSON here
         #[arg(long)]
         out: Option<PathBuf>,
@@ -317,10 +327,44 @@ fn run(cli: Cli) -> Result<()> {
             let config = load_config(config, backend)?;
             evaluate(&Sequence::open(&seq)?, &config, json, debug.as_deref())?;
         }
-        Command::Replay { seq, out, render, no_drift_filter, config, backend } => {
+        Command::Replay {
+            seq,
+            depth_topic,
+            camera_info_topic,
+            odometry_topic,
+            out,
+            render,
+            no_drift_filter,
+            config,
+            backend,
+        } => {
             let mut config = load_config(config, backend)?;
             if no_drift_filter {
                 config.map.drift_filter = false;
+            }
+            if seq.extension().is_some_and(|e| e == "bag") {
+                let topics = polymap::logs::LogTopics {
+                    depth: depth_topic,
+                    camera_info: camera_info_topic,
+                    odometry: odometry_topic,
+                };
+                let mut map = polymap::map::persist::initial_map(&config.map);
+                let bar = progress(0, "replay");
+                let r = polymap::logs::replay_bag(&seq, &topics, &config, &mut map, |done, of| {
+                    bar.set_length(of);
+                    bar.set_position(done);
+                })?;
+                bar.finish_and_clear();
+                println!("{}: {r} -> {} map polygons; drift {:.1} mm", seq.display(), map.len(), map.drift.z * 1e3);
+                if let Some(path) = &out {
+                    replay::write_json(&mut map, path)?;
+                }
+                if let Some(path) = &render {
+                    polymap::map::render::top_down(&map.snapshot(), None)
+                        .save(path)
+                        .with_context(|| format!("writing {}", path.display()))?;
+                }
+                return Ok(());
             }
             let s = Sequence::open(&seq)?;
             let mut map = polymap::map::persist::initial_map(&config.map);

@@ -65,28 +65,38 @@ impl ConnectionHeader {
     }
 
     /// A header's fields from its bytes (without the total length).
-    pub fn decode(mut bytes: &[u8]) -> Result<ConnectionHeader, TcprosError> {
+    pub fn decode(bytes: &[u8]) -> Result<ConnectionHeader, TcprosError> {
         let mut fields = BTreeMap::new();
-        while !bytes.is_empty() {
-            let Some((len, rest)) = bytes.split_first_chunk::<4>() else {
-                return Err(TcprosError::Malformed(format!("{} stray bytes at the end", bytes.len())));
-            };
-            let len = u32::from_le_bytes(*len) as usize;
-            if len > rest.len() {
-                return Err(TcprosError::Malformed(format!(
-                    "a field claims {len} bytes where {} are left",
-                    rest.len()
-                )));
-            }
-            let (field, rest) = rest.split_at(len);
-            let field = std::str::from_utf8(field).map_err(|e| TcprosError::Malformed(format!("a field: {e}")))?;
-            let (k, v) =
-                field.split_once('=').ok_or_else(|| TcprosError::Malformed(format!("{field:?} has no `=`")))?;
+        for (k, v) in fields_of(bytes)? {
+            let v = std::str::from_utf8(v).map_err(|e| TcprosError::Malformed(format!("field {k}: {e}")))?;
             fields.insert(k.to_string(), v.to_string());
-            bytes = rest;
         }
         Ok(ConnectionHeader(fields))
     }
+}
+
+/// The `name=value` fields of a header (TCPROS's, or a rosbag record's, whose values may be
+/// binary), each checked against the bytes left.
+pub fn fields_of(mut bytes: &[u8]) -> Result<Vec<(&str, &[u8])>, TcprosError> {
+    let mut fields = Vec::new();
+    while !bytes.is_empty() {
+        let Some((len, rest)) = bytes.split_first_chunk::<4>() else {
+            return Err(TcprosError::Malformed(format!("{} stray bytes at the end", bytes.len())));
+        };
+        let len = u32::from_le_bytes(*len) as usize;
+        if len > rest.len() {
+            return Err(TcprosError::Malformed(format!("a field claims {len} bytes where {} are left", rest.len())));
+        }
+        let (field, rest) = rest.split_at(len);
+        let eq = field.iter().position(|&b| b == b'=').ok_or_else(|| {
+            TcprosError::Malformed(format!("{:?} has no `=`", String::from_utf8_lossy(&field[..field.len().min(40)])))
+        })?;
+        let name =
+            std::str::from_utf8(&field[..eq]).map_err(|e| TcprosError::Malformed(format!("a field name: {e}")))?;
+        fields.push((name, &field[eq + 1..]));
+        bytes = rest;
+    }
+    Ok(fields)
 }
 
 /// The peer's connection header, within [`HANDSHAKE_TIMEOUT`].

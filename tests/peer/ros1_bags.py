@@ -3,17 +3,28 @@
 
 - `write-absurd OUT.bag`: nav_msgs/Odometry on /vins_estimator/odometry whose positions are
   not finite, for `rosbag play` (roscpp) to send to polymap.
+- `write-sequence OUT.bag SEQ COMPRESSION`: a polymap sequence as the robot's stack records
+  it: the depth frames as realsense-ros publishes the L515's (16UC1 in millimetres, REP 118)
+  with their camera_info, and each frame's pose as VINS-Fusion's odometry, chunks
+  compressed as asked (none, bz2, lz4).
+- `write-topicless OUT.bag`: a bag with only /tf.
 - `read IN.bag`: what `rosbag record` (roscpp) kept of polymap's topics, decoded with the
   classes rosbag makes from the definitions polymap sent (polymap_msgs is not installed
   where this runs), as one JSON object.
 """
 
 import json
+import pathlib
 import sys
 
 import rosbag
 import rospy
 from nav_msgs.msg import Odometry
+from sensor_msgs.msg import CameraInfo, Image
+from tf2_msgs.msg import TFMessage
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from polymap_sequence import camera_toml, read_png16, read_poses  # noqa: E402
 
 
 def write_absurd(path):
@@ -25,6 +36,38 @@ def write_absurd(path):
             m.pose.pose.position.x = float("nan")
             m.pose.pose.orientation.w = 1.0
             bag.write("/vins_estimator/odometry", m, m.header.stamp)
+
+
+def write_sequence(path, seq, compression):
+    seq = pathlib.Path(seq)
+    cam = camera_toml(seq)
+    with rosbag.Bag(path, "w", compression=compression) as bag:
+        for k, (stamp_ns, p, q) in enumerate(read_poses(seq)):
+            stamp = rospy.Time(stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000)
+            odom = Odometry()
+            odom.header.stamp, odom.header.frame_id, odom.child_frame_id = stamp, "world", "body"
+            (odom.pose.pose.position.x, odom.pose.pose.position.y, odom.pose.pose.position.z) = p
+            (odom.pose.pose.orientation.x, odom.pose.pose.orientation.y, odom.pose.pose.orientation.z,
+             odom.pose.pose.orientation.w) = q
+            bag.write("/vins_estimator/odometry", odom, stamp)
+            width, height, samples = read_png16(seq / "depth" / f"{k:06d}.png")
+            mm = bytearray(2 * width * height)
+            for i in range(width * height):
+                v = round(((samples[2 * i] << 8) | samples[2 * i + 1]) * cam["depth_scale"] * 1000.0)
+                mm[2 * i], mm[2 * i + 1] = v & 0xFF, v >> 8
+            info = CameraInfo(width=width, height=height, distortion_model="plumb_bob", D=[0.0] * 5,
+                              K=[cam["fx"], 0.0, cam["cx"], 0.0, cam["fy"], cam["cy"], 0.0, 0.0, 1.0])
+            info.header.stamp = stamp
+            bag.write("/l515/depth/camera_info", info, stamp)
+            image = Image(height=height, width=width, encoding="16UC1", step=2 * width, data=bytes(mm))
+            image.header.stamp, image.header.frame_id = stamp, "l515_depth_optical_frame"
+            bag.write("/l515/depth/image_rect_raw", image, stamp)
+
+
+def write_topicless(path):
+    with rosbag.Bag(path, "w") as bag:
+        for k in range(3):
+            bag.write("/tf", TFMessage(), rospy.Time(1_700_000_000 + k, 0))
 
 
 def read(path):
@@ -45,4 +88,6 @@ def read(path):
 
 
 if __name__ == "__main__":
-    {"write-absurd": write_absurd, "read": read}[sys.argv[1]](sys.argv[2])
+    commands = {"write-absurd": write_absurd, "write-sequence": write_sequence, "write-topicless": write_topicless,
+                "read": read}
+    commands[sys.argv[1]](*sys.argv[2:])

@@ -11,11 +11,9 @@ mapped: the frame's index, stamp, the map's drift then, and the polygons' outlin
 import argparse
 import json
 import pathlib
-import struct
 import sys
 import threading
 import time
-import zlib
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 
@@ -25,48 +23,7 @@ from nav_msgs.msg import Odometry  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 
 from polymap_msgs.msg import FramePolygons, MapUpdate  # noqa: E402
-from vins_schedule import read_poses  # noqa: E402
-
-
-def read_png16(path):
-    """(width, height, big-endian 16-bit samples) of a 16-bit grayscale PNG."""
-    data = path.read_bytes()
-    assert data[:8] == b"\x89PNG\r\n\x1a\n", path
-    pos, idat, width, height = 8, b"", 0, 0
-    while pos < len(data):
-        n, kind = struct.unpack(">I4s", data[pos:pos + 8])
-        body = data[pos + 8:pos + 8 + n]
-        if kind == b"IHDR":
-            width, height, depth, colour, _, _, interlace = struct.unpack(">IIBBBBB", body)
-            assert (depth, colour, interlace) == (16, 0, 0), (path, depth, colour, interlace)
-        elif kind == b"IDAT":
-            idat += body
-        pos += 12 + n
-    raw, bpp, stride = zlib.decompress(idat), 2, width * 2
-    out, prev = bytearray(), bytearray(stride)
-    for y in range(height):
-        f, line = raw[y * (stride + 1)], bytearray(raw[y * (stride + 1) + 1:(y + 1) * (stride + 1)])
-        for i in range(stride):
-            a = line[i - bpp] if i >= bpp else 0
-            b = prev[i]
-            c = prev[i - bpp] if i >= bpp else 0
-            if f == 1:
-                line[i] = (line[i] + a) & 0xFF
-            elif f == 2:
-                line[i] = (line[i] + b) & 0xFF
-            elif f == 3:
-                line[i] = (line[i] + (a + b) // 2) & 0xFF
-            elif f == 4:
-                p = a + b - c
-                pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
-                line[i] = (line[i] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 0xFF
-        out += line
-        prev = line
-    return width, height, bytes(out)
-
-
-def camera_toml(seq):
-    return {k.strip(): float(v) for k, v in (l.split("=") for l in (seq / "camera.toml").read_text().splitlines() if "=" in l)}
+from polymap_sequence import camera_toml, read_png16, read_poses  # noqa: E402
 
 
 def main():

@@ -2,18 +2,7 @@
 node that shares no code with polymap would rebuild it from poses.txt. Plain Python, so
 both the ROS 2 peer (the venv's python) and the ROS 1 peer (Debian's, for rospy) use it."""
 
-
-def read_poses(seq):
-    """(stamp ns, position, quaternion xyzw) per frame, stamps read exactly from the text."""
-    out = []
-    for line in (seq / "poses.txt").read_text().splitlines():
-        if not line.strip() or line.startswith("#"):
-            continue
-        f = line.split()
-        sec, _, frac = f[0].partition(".")
-        stamp = int(sec) * 1_000_000_000 + int((frac + "000000000")[:9])
-        out.append((stamp, [float(v) for v in f[1:4]], [float(v) for v in f[4:8]]))
-    return out
+from polymap_sequence import read_poses
 
 
 class Schedule:
