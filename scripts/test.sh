@@ -3,8 +3,9 @@
 # Installs what the tests need first: Mesa's software Vulkan (lavapipe) so the wgpu
 # pipeline runs where there is no GPU; a Python virtualenv for the Python client tests;
 # librealsense2 2.54 (the system's, or from the pyrealsense2 wheel), so the `realsense`
-# feature builds, links and plays bags here (scripts/librealsense.sh). Works with whatever
-# python3 the machine has (Debian 12, Ubuntu 22.04 and 24.04).
+# feature builds, links and plays bags here (scripts/librealsense.sh); and ROS 1 from the
+# distribution's archive (Debian 12's ros_comm, Noetic's). Works with whatever python3 the
+# machine has.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 

@@ -245,6 +245,7 @@ fn a_rospy_node_receives_every_topic_feeds_odometry_and_calls_the_services() {
     let out = peer.output().unwrap();
     // rosservice call, as a user types it, while polymap still runs.
     let foothold = core.command("rosservice", &["call", "/polymap/get_foothold", "point: {x: 0.42, y: 0.0, z: 0.30}"]);
+    let whole_map = core.command("rosservice", &["call", "/polymap/get_map"]);
     let status_echo = core.command("rostopic", &["echo", "-n", "1", "/polymap/status"]);
     stop(&mut polymap);
     let log_text = std::fs::read_to_string(&log).unwrap();
@@ -328,7 +329,11 @@ fn a_rospy_node_receives_every_topic_feeds_odometry_and_calls_the_services() {
     assert!(v["terrain"]["regions"].as_u64().unwrap() >= 3, "{}", v["terrain"]);
     assert_eq!(v["terrain"]["frame"], "map");
 
-    // The odometry from rospy fed the mapper: frames mapped, the absurd poses refused.
+    // The odometry from rospy fed the mapper: frames mapped, none without a pose once it
+    // flowed, the absurd poses refused.
+    let (early, during) = (&v["status_early"], &v["status_during"]);
+    assert!(during["processed"].as_u64().unwrap() >= early["processed"].as_u64().unwrap() + 10, "{early} -> {during}");
+    assert_eq!(during["without_pose"], early["without_pose"], "no frame without a pose once odometry flowed");
     let status = &v["status"];
     assert!(status["processed"].as_u64().unwrap() >= 20, "{status}");
     assert!(status["poses_accepted"].as_u64().unwrap() >= 50, "{status}");
@@ -346,6 +351,8 @@ fn a_rospy_node_receives_every_topic_feeds_odometry_and_calls_the_services() {
     assert!(v["get_map"]["treads"].as_u64().unwrap() >= 3, "{}", v["get_map"]);
     assert_eq!(v["get_map"]["frame"], "map");
     assert_eq!(v["get_foothold"]["found"], true, "{}", v["get_foothold"]);
+    let whole_map = whole_map.unwrap();
+    assert!(whole_map.matches("convex_pieces:").count() >= 5, "rosservice call get_map: {whole_map}");
     let foothold = foothold.unwrap();
     assert!(foothold.contains("found: True"), "rosservice call get_foothold: {foothold}");
     let status_echo = status_echo.unwrap();

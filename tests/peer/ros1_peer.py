@@ -131,13 +131,21 @@ def main():
         put.publish(m)
         time.sleep(0.05)
 
+    def status_now():
+        with lock:
+            st = streams[f"{NS}/status"].last
+        return None if st is None else {"processed": st.frames_processed, "without_pose": st.frames_without_pose}
+
     schedule = Schedule(args.sequence)
-    published, start = 0, time.time()
+    published, start, status_early = 0, time.time(), None
     while time.time() - start < args.seconds:
         for shown, p, q in schedule.due(time.time_ns()):
             put.publish(odometry(shown, p, q))
             published += 1
+        if status_early is None and time.time() - start > 3.0:
+            status_early = status_now()
         time.sleep(0.003)
+    status_during = status_now()
     stopped_at = time.time()
 
     # No more poses: no more frames mapped, so the map stops changing. A subscriber that
@@ -169,6 +177,8 @@ def main():
             "counts": {n: st.count for n, st in s.items()},
             "polygon_new_markers": strips,
             "frame_polygons_frame": s[f"{NS}/frame_polygons"].last.header.frame_id if s[f"{NS}/frame_polygons"].last else None,
+            "status_early": status_early,
+            "status_during": status_during,
             "status": None if status is None else {
                 "processed": status.frames_processed, "without_pose": status.frames_without_pose,
                 "poses_accepted": status.poses_accepted, "poses_refused": status.poses_refused,
