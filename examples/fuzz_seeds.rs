@@ -53,7 +53,7 @@ fn main() -> anyhow::Result<()> {
     let seq = polymap::sequence::Sequence::open(root.join("mock_frames/straight_320"))?;
     let intr = seq.intrinsics.scaled_to(32, 24);
     let camera = toml::to_string(&intr)?;
-    let poses = polymap::sequence::format_tum_line(&seq.poses[0]);
+    let poses = polymap::sequence::format_tum_line(&seq.poses[0], false);
     let depth = seq.depth(0)?;
     let small: Vec<u16> =
         (0..24).flat_map(|v| (0..32).map(move |u| (u, v))).map(|(u, v)| depth.pixels[v * 10 * 320 + u * 10]).collect();

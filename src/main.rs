@@ -6,6 +6,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use polymap::config::{Backend, Config};
+use polymap::logs::{Log, LogKind, LogTopics};
 use polymap::mock::vins::MockVinsOptions;
 use polymap::sequence::Sequence;
 use polymap::synth::{self, SceneKind, SynthOptions};
@@ -47,9 +48,12 @@ enum Command {
         #[arg(long)]
         preview: bool,
     },
-    /// Check a sequence and summarise it; --preview writes colour pictures of its frames
+    /// Check a sequence and summarise it (--preview writes colour pictures of its frames), or
+    /// say what a log (FILE.bag, FILE.mcap, a rosbag2 directory) holds and what of it replays
     Inspect {
         seq: PathBuf,
+        #[command(flatten)]
+        topics: LogTopicArgs,
         /// Directory for one picture per frame: depth in colour, and truth labels if present
         #[arg(long)]
         preview: Option<PathBuf>,
@@ -120,19 +124,12 @@ enum Command {
         #[arg(long)]
         threads: Option<usize>,
     },
-    /// Map a whole sequence, or a ROS 1 bag (FILE.bag: depth images, their camera_info and
-    /// VINS's odometry), and write the map and its picture
+    /// Map a whole sequence, or a robot's log: a ROS 1 bag (FILE.bag) or a ROS 2 bag in MCAP
+    /// (FILE.mcap or a rosbag2 directory) with depth images, their camera_info and odometry
     Replay {
         seq: PathBuf,
-        /// A bag's depth images (sensor_msgs/Image: 16UC1 in mm, or sources.depth.image_unit_m; 32FC1 in m)
-        #[arg(long, default_value_t = polymap::logs::LogTopics::ros1().depth)]
-        depth_topic: String,
-        /// A bag's camera_info for those images
-        #[arg(long, default_value_t = polymap::logs::LogTopics::ros1().camera_info)]
-        camera_info_topic: String,
-        /// A bag's odometry (nav_msgs/Odometry): each image's pose, interpolated at its stamp
-        #[arg(long, default_value_t = polymap::logs::LogTopics::ros1().odometry)]
-        odometry_topic: String,
+        #[command(flatten)]
+        topics: LogTopicArgs,
         /// Write the map's JSON here
         #[arg(long)]
         out: Option<PathBuf>,
@@ -158,6 +155,24 @@ enum Command {
         /// Stop after this many seconds (default: until SIGINT / SIGTERM)
         #[arg(long)]
         duration: Option<f64>,
+    },
+    /// The live mapper (as `run`), recording every frame it maps with the pose it used, as a
+    /// sequence in OUT that `polymap replay OUT` maps to the same map (OUT/map.json, the live
+    /// session's); ends at --duration, at a limit, or at SIGINT / SIGTERM
+    Record {
+        out: PathBuf,
+        /// Settings (default: the built-in defaults: the mock camera on the bundled stairs)
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Stop after this many seconds
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Stop after this many frames
+        #[arg(long)]
+        max_frames: Option<u64>,
+        /// Stop once the depth images take this many megabytes
+        #[arg(long)]
+        max_mb: Option<f64>,
     },
     /// The whole loop on one machine: mock camera + mock VINS + mapper over Zenoh on
     /// loopback, printing live status; then the final map and its picture
@@ -237,13 +252,17 @@ enum Command {
 fn main() {
     polymap::keep_freed_memory();
     polymap::files::survive_file_size_limits();
+    let cli = Cli::parse();
+    let terminal = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    // On a terminal, a recording's progress line stands for the 1 Hz status lines.
+    let level = if terminal && matches!(cli.command, Command::Record { .. }) { "warn" } else { "info" };
     tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
+        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| level.into()))
         .with_writer(std::io::stderr)
         // Colours for a terminal only, not for journald or a log file.
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_ansi(terminal)
         .init();
-    if let Err(e) = run(Cli::parse()) {
+    if let Err(e) = run(cli) {
         eprintln!("error: {e:#}");
         std::process::exit(1);
     }
@@ -272,7 +291,13 @@ fn run(cli: Cli) -> Result<()> {
                 write_previews(&seq, &out.join("preview"))?;
             }
         }
-        Command::Inspect { seq, preview } => {
+        Command::Inspect { seq, topics, preview } => {
+            if let Some(log) = Log::find(&seq)? {
+                if preview.is_some() {
+                    bail!("--preview: for sequences; replay the log with --render to see its map");
+                }
+                return summarise_log(&log, &topics.of(log.kind));
+            }
             let s = Sequence::open(&seq)?;
             summarise(&s)?;
             if let Some(dir) = preview {
@@ -327,34 +352,22 @@ fn run(cli: Cli) -> Result<()> {
             let config = load_config(config, backend)?;
             evaluate(&Sequence::open(&seq)?, &config, json, debug.as_deref())?;
         }
-        Command::Replay {
-            seq,
-            depth_topic,
-            camera_info_topic,
-            odometry_topic,
-            out,
-            render,
-            no_drift_filter,
-            config,
-            backend,
-        } => {
+        Command::Replay { seq, topics, out, render, no_drift_filter, config, backend } => {
             let mut config = load_config(config, backend)?;
             if no_drift_filter {
                 config.map.drift_filter = false;
             }
-            if seq.extension().is_some_and(|e| e == "bag") {
-                let topics = polymap::logs::LogTopics {
-                    depth: depth_topic,
-                    camera_info: camera_info_topic,
-                    odometry: odometry_topic,
-                };
+            if let Some(log) = Log::find(&seq)? {
                 let mut map = polymap::map::persist::initial_map(&config.map);
                 let bar = progress(0, "replay");
-                let r = polymap::logs::replay_bag(&seq, &topics, &config, &mut map, |done, of| {
+                let r = polymap::logs::replay(&log, &topics.of(log.kind), &config, &mut map, |done, of| {
                     bar.set_length(of);
                     bar.set_position(done);
                 })?;
                 bar.finish_and_clear();
+                if r.mapped == 0 {
+                    bail!("{}: no image mapped: {r}", seq.display());
+                }
                 println!("{}: {r} -> {} map polygons; drift {:.1} mm", seq.display(), map.len(), map.drift.z * 1e3);
                 if let Some(path) = &out {
                     replay::write_json(&mut map, path)?;
@@ -415,6 +428,29 @@ fn run(cli: Cli) -> Result<()> {
             let duration = duration.map(seconds).transpose()?;
             let runtime = tokio::runtime::Runtime::new()?;
             println!("{}", runtime.block_on(polymap::runtime::run(&config, duration))?);
+        }
+        Command::Record { out, config, duration, max_frames, max_mb } => {
+            let config = load_config(config, None)?;
+            let duration = duration.map(seconds).transpose()?;
+            let max_bytes = match max_mb {
+                Some(mb) if !(mb.is_finite() && mb > 0.0) => bail!("--max-mb {mb}: give a positive size"),
+                Some(mb) => Some((mb * 1e6) as u64),
+                None => None,
+            };
+            if max_frames == Some(0) {
+                bail!("--max-frames 0: give at least one frame");
+            }
+            let options = polymap::runtime::record::RecordOptions { dir: out.clone(), max_frames, max_bytes };
+            let runtime = tokio::runtime::Runtime::new()?;
+            let (report, recorded) = runtime.block_on(polymap::runtime::run_recording(&config, duration, options))?;
+            println!("{report}");
+            println!(
+                "recorded {} frames ({:.1} MB) into {}; `polymap replay {}` maps them again",
+                recorded.frames,
+                recorded.bytes as f64 / 1e6,
+                out.display(),
+                out.display()
+            );
         }
         Command::Demo {
             duration,
@@ -804,6 +840,74 @@ fn bench(s: &Sequence, config: &Config, frames: usize, json: bool) -> Result<()>
         println!("{:>10} {:>10.3} {:>10.3}", stage.name(), sp.median, sp.p99);
     }
     println!("{fps:.1} frames per second end to end");
+    Ok(())
+}
+
+/// A log's topics; each defaults to what logs of its kind use (`polymap::logs::LogTopics::defaults`).
+#[derive(clap::Args)]
+struct LogTopicArgs {
+    /// A log's depth images (sensor_msgs/Image: 16UC1 in mm, or sources.depth.image_unit_m;
+    /// 32FC1 in m) [default: /l515/depth/image_rect_raw in a ROS 1 bag,
+    /// /camera/camera/depth/image_rect_raw in MCAP]
+    #[arg(long)]
+    depth_topic: Option<String>,
+    /// Their camera_info [default: the depth topic's namespace's camera_info]
+    #[arg(long)]
+    camera_info_topic: Option<String>,
+    /// The odometry (nav_msgs/Odometry or geometry_msgs/PoseStamped): each image's pose,
+    /// interpolated at its stamp [default: /vins_estimator/odometry in a ROS 1 bag, /odometry in MCAP]
+    #[arg(long)]
+    odometry_topic: Option<String>,
+}
+
+impl LogTopicArgs {
+    fn of(&self, kind: LogKind) -> LogTopics {
+        let d = LogTopics::defaults(kind);
+        LogTopics {
+            depth: self.depth_topic.clone().unwrap_or(d.depth),
+            camera_info: match (&self.camera_info_topic, &self.depth_topic) {
+                (Some(info), _) => info.clone(),
+                (None, Some(depth)) => match depth.rsplit_once('/') {
+                    Some((namespace, _)) => format!("{namespace}/camera_info"),
+                    None => "camera_info".into(),
+                },
+                (None, None) => d.camera_info,
+            },
+            odometry: self.odometry_topic.clone().unwrap_or(d.odometry),
+        }
+    }
+}
+
+/// What a log holds, and what of it a replay with `topics` would map.
+fn summarise_log(log: &Log, topics: &LogTopics) -> Result<()> {
+    let scan = polymap::logs::scan(log, &topics.odometry)?;
+    let files = if log.files.len() > 1 { format!(" ({} files)", log.files.len()) } else { String::new() };
+    println!("{}: {:?}{files}, {} topics", log.path.display(), log.kind, scan.topics.len());
+    for (topic, t) in &scan.topics {
+        let span_s = (t.last_ns - t.first_ns) as f64 * 1e-9;
+        let rate = if span_s > 0.0 { format!(", {:.1} Hz", (t.count - 1) as f64 / span_s) } else { String::new() };
+        let role = [(&topics.depth, "depth"), (&topics.camera_info, "camera_info"), (&topics.odometry, "odometry")]
+            .iter()
+            .find(|(name, _)| *name == topic)
+            .map_or(String::new(), |(_, role)| format!("  <- {role}"));
+        println!("  {topic} ({}): {} messages over {span_s:.1} s{rate}{role}", t.message_type, t.count);
+    }
+    let missing: Vec<&str> = [&topics.depth, &topics.camera_info, &topics.odometry]
+        .into_iter()
+        .filter(|t| scan.count(t) == 0)
+        .map(String::as_str)
+        .collect();
+    match missing.is_empty() {
+        true => println!(
+            "  {} poses ({} refused); replay maps the depth images with a pose",
+            scan.poses.len(),
+            scan.poses_refused
+        ),
+        false => println!(
+            "  missing for a replay: {} (see --depth-topic, --camera-info-topic, --odometry-topic)",
+            missing.join(", ")
+        ),
+    }
     Ok(())
 }
 

@@ -269,6 +269,9 @@ pub fn parse_stamp(s: &str) -> Option<StampNs> {
 /// Largest |‖q‖ - 1| accepted in poses.txt: TUM files carry 6-7 digits.
 pub const QUATERNION_NORM_TOLERANCE: f64 = 1e-3;
 
+/// Largest |‖q‖ - 1| of a quaternion taken as written rather than normalised.
+const EXACT_UNIT_TOLERANCE: f64 = 1e-12;
+
 /// One TUM line "stamp tx ty tz qx qy qz qw" to a pose, or why not.
 pub fn parse_tum_line(line: &str) -> Result<Pose, (SequenceErrorKind, String)> {
     let fields: Vec<&str> = line.split_whitespace().collect();
@@ -305,25 +308,26 @@ pub fn parse_tum_line(line: &str) -> Result<Pose, (SequenceErrorKind, String)> {
             format!("quaternion (qx qy qz qw) has norm {norm:.6}, expected 1"),
         ));
     }
-    let transform = Isometry3::from_parts(Translation3::new(v[0], v[1], v[2]), UnitQuaternion::from_quaternion(q));
+    // A quaternion unit to double precision (as `polymap record` writes them) is kept as
+    // written, so a recording replays bit for bit; others are normalised.
+    let rotation = match (norm - 1.0).abs() <= EXACT_UNIT_TOLERANCE {
+        true => UnitQuaternion::new_unchecked(q),
+        false => UnitQuaternion::from_quaternion(q),
+    };
+    let transform = Isometry3::from_parts(Translation3::new(v[0], v[1], v[2]), rotation);
     Ok(Pose { stamp_ns, transform })
 }
 
-/// A pose as a TUM line (stamp with nine decimals, so it round-trips exactly).
-pub fn format_tum_line(pose: &Pose) -> String {
+/// A pose as a TUM line: the stamp exact (nine decimals), the numbers with nine decimals
+/// (`exact`: with as many as make them read back bit for bit).
+pub fn format_tum_line(pose: &Pose, exact: bool) -> String {
     let t = pose.transform.translation.vector;
     let q = pose.transform.rotation.coords; // x, y, z, w
-    format!(
-        "{} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9}",
-        ns_to_seconds_string(pose.stamp_ns),
-        t.x,
-        t.y,
-        t.z,
-        q.x,
-        q.y,
-        q.z,
-        q.w
-    )
+    let numbers = [t.x, t.y, t.z, q.x, q.y, q.z, q.w].map(|v| match exact {
+        true => format!("{v:?}"),
+        false => format!("{v:.9}"),
+    });
+    format!("{} {}", ns_to_seconds_string(pose.stamp_ns), numbers.join(" "))
 }
 
 fn read_poses(path: &Path, frames: usize) -> Result<Vec<Pose>, SequenceError> {
@@ -446,6 +450,8 @@ pub struct SequenceWriter {
     intrinsics: Intrinsics,
     poses: Vec<Pose>,
     with_labels: bool,
+    /// Poses with every digit (`polymap record`), not nine decimals.
+    exact_poses: bool,
 }
 
 impl SequenceWriter {
@@ -459,14 +465,25 @@ impl SequenceWriter {
             fs::create_dir_all(dir.join("labels"))?;
         }
         fs::write(dir.join("camera.toml"), toml::to_string(&intrinsics).map_err(std::io::Error::other)?)?;
-        Ok(SequenceWriter { dir, intrinsics, poses: Vec::new(), with_labels })
+        Ok(SequenceWriter { dir, intrinsics, poses: Vec::new(), with_labels, exact_poses: false })
+    }
+
+    /// Writes poses.txt's numbers so they read back bit for bit.
+    pub fn with_exact_poses(self) -> SequenceWriter {
+        SequenceWriter { exact_poses: true, ..self }
+    }
+
+    pub fn intrinsics(&self) -> &Intrinsics {
+        &self.intrinsics
     }
 
     /// Appends a frame: its depth, T_world_camera and (if the writer has them) labels.
-    pub fn push(&mut self, depth: &[u16], pose: Pose, labels: Option<&[u16]>) -> std::io::Result<()> {
+    /// Returns the depth PNG's size in bytes.
+    pub fn push(&mut self, depth: &[u16], pose: Pose, labels: Option<&[u16]>) -> std::io::Result<u64> {
         let k = self.poses.len();
         let (w, h) = (self.intrinsics.width, self.intrinsics.height);
-        write_png16(&self.dir.join("depth").join(frame_name(k)), w, h, depth)?;
+        let depth_path = self.dir.join("depth").join(frame_name(k));
+        write_png16(&depth_path, w, h, depth)?;
         match (self.with_labels, labels) {
             (true, Some(l)) => write_png16(&self.dir.join("labels").join(frame_name(k)), w, h, l)?,
             (false, None) => {}
@@ -478,14 +495,14 @@ impl SequenceWriter {
             }
         }
         self.poses.push(pose);
-        Ok(())
+        Ok(fs::metadata(&depth_path)?.len())
     }
 
     pub fn finish(self, truth: Option<&Truth>) -> std::io::Result<()> {
         let mut out = BufWriter::new(File::create(self.dir.join("poses.txt"))?);
         writeln!(out, "# stamp tx ty tz qx qy qz qw  (T_world_camera, optical frame; stamp in seconds)")?;
         for p in &self.poses {
-            writeln!(out, "{}", format_tum_line(p))?;
+            writeln!(out, "{}", format_tum_line(p, self.exact_poses))?;
         }
         out.flush()?;
         if let Some(t) = truth {

@@ -15,7 +15,7 @@ use polymap::mock::SequenceClock;
 use polymap::mock::vins::{MockVinsOptions, PoseTiming};
 use polymap::pose::{PoseBuffer, PoseLimits, RawPose};
 use polymap::runtime::status::Counters;
-use polymap::runtime::worker::FrameMapper;
+use polymap::runtime::worker::{Extracted, FrameMapper};
 use polymap::sequence::Sequence;
 use polymap::types::{Pose, StampNs};
 
@@ -96,7 +96,7 @@ fn simulate(seq: &Sequence, frames: &[(FramePolygons, Grid<f32>)], config: &Conf
         if let Some((stamp, _, k)) = busy.filter(|&(_, done, _)| done <= t) {
             let (mut polygons, depth) = frames[k].clone();
             polygons.stamp_ns = stamp;
-            mapper.queue(polygons, depth, seq.intrinsics, t);
+            mapper.queue(Extracted { polygons, depth, intrinsics: seq.intrinsics, raw: None }, t);
             busy = None;
         }
         if busy.is_none()

@@ -11,6 +11,7 @@ use std::io::{BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use super::{Connection, Encoding, Message};
 use crate::ros1::tcpros::fields_of;
 
 const MAGIC: &[u8] = b"#ROSBAG V2.0\n";
@@ -33,21 +34,6 @@ pub enum BagError {
     Truncated { path: PathBuf, at: u64, what: String },
     #[error("{path}: the record at byte {at}: {why}")]
     Record { path: PathBuf, at: u64, why: String },
-}
-
-/// A connection: the topic and type messages on it have.
-#[derive(Clone, Debug)]
-pub struct Connection {
-    pub topic: String,
-    pub message_type: String,
-}
-
-/// A message: its connection, its receive time and its serialized bytes.
-#[derive(Debug)]
-pub struct Message {
-    pub connection: Arc<Connection>,
-    pub time_ns: u64,
-    pub data: Vec<u8>,
 }
 
 /// A record's header and data.
@@ -161,7 +147,7 @@ impl BagReader {
                     .find(|(k, _)| *k == "type")
                     .map(|(_, v)| String::from_utf8_lossy(v).into_owned())
                     .ok_or_else(|| self.bad(at, "a connection without a type"))?;
-                self.connections.insert(conn, Arc::new(Connection { topic, message_type }));
+                self.connections.insert(conn, Arc::new(Connection { topic, message_type, encoding: Encoding::Ros1 }));
             }
             Some([OP_MESSAGE]) => {
                 let conn = u32_of("conn")?;

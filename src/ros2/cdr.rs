@@ -93,6 +93,11 @@ pub fn from_slice<'a, T: Deserialize<'a>>(bytes: &'a [u8]) -> Result<T, CdrError
     if bytes.len() > MAX_MESSAGE_BYTES {
         return Err(CdrError::TooLarge(bytes.len()));
     }
+    from_slice_unlimited(bytes)
+}
+
+/// As [`from_slice`], for a message whose size its caller has bounded (images in a log).
+pub fn from_slice_unlimited<'a, T: Deserialize<'a>>(bytes: &'a [u8]) -> Result<T, CdrError> {
     let little = match bytes.get(..4) {
         Some(h) if h[..2] == HEADER_LE[..2] => true,
         Some(h) if h[..2] == HEADER_BE[..2] => false,

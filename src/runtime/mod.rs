@@ -24,6 +24,7 @@ pub mod awaiting;
 pub mod demo;
 pub mod odometry;
 pub mod publish;
+pub mod record;
 pub mod router;
 pub mod services;
 pub mod slot;
@@ -50,6 +51,37 @@ use worker::{FrameEvent, WorkerEnd};
 /// Runs until SIGINT / SIGTERM or `duration`; saves the map at the end. Returns the
 /// counts of the whole run, its latency over every frame published.
 pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::Report> {
+    Ok(run_with(config, duration, None).await?.0)
+}
+
+/// As [`run`], recording every frame mapped into `options.dir` (see [`record`]), the live
+/// map at the end beside it as `map.json`; ends early when the recording is full.
+pub async fn run_recording(
+    config: &Config,
+    duration: Option<Duration>,
+    options: record::RecordOptions,
+) -> Result<(status::Report, record::Recorded)> {
+    let dir = options.dir.clone();
+    let (report, recorded, map) = run_with(config, duration, Some(options)).await?;
+    let recorded = recorded.unwrap_or_default();
+    if recorded.frames > 0 {
+        crate::map::persist::save_to(&map.lock().snapshot(), &dir.join("map.json"))?;
+    }
+    Ok((report, recorded))
+}
+
+async fn run_with(
+    config: &Config,
+    duration: Option<Duration>,
+    record: Option<record::RecordOptions>,
+) -> Result<(status::Report, Option<record::Recorded>, Arc<Mutex<PolygonMap>>)> {
+    let (recorder, recording) = match record {
+        Some(options) => {
+            let (recorder, thread) = record::Recorder::start(options)?;
+            (Some(recorder), Some(thread))
+        }
+        None => (None, None),
+    };
     let seq = sources::mock_sequence(config)?;
     crate::map::persist::remove_stale_configured(&config.map);
     let session = crate::ros2::session::open(crate::ros2::session::config(&config.zenoh.config_file)?).await?;
@@ -74,7 +106,7 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
         map: map.clone(),
         counters: counters.clone(),
     };
-    let worker = worker::spawn(config, shared, events_tx)?;
+    let worker = worker::spawn(config, shared, recorder, events_tx)?;
     let camera = sources::start_depth(config, seq.as_ref(), &wires, slot, stop.clone(), counters.clone()).await?;
     let d435i = sources::start_d435i(config, seq.as_ref(), &wires, stop.clone()).await?;
     // This run's epoch: versions count from the snapshot's within it, and a client seeing a
@@ -169,17 +201,19 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
     let end =
         tokio::task::spawn_blocking(move || worker.join()).await?.map_err(|_| anyhow!("the extractor thread died"))?;
     all_latencies.append(&mut latencies);
-    if let WorkerEnd::Panicked { during, message, map_intact } = end {
-        if map_intact {
+    // Its writer ends with the map thread; an error of its is said once the map is saved.
+    let recorded = recording.map(|r| r.finish());
+    match end {
+        WorkerEnd::Panicked { during, message, map_intact: true } => {
             save_snapshot(&map, config).await.context("saving the map after the extractor thread's panic")?;
             bail!("the extractor thread panicked {during}: {message} (the map is saved)");
         }
-        bail!(
+        WorkerEnd::Panicked { during, message, map_intact: false } => bail!(
             "the extractor thread panicked {during}: {message}; the map may be half-changed, so the last snapshot saved is kept"
-        );
-    }
-    if worker_ended {
-        tracing::warn!("the extractor thread stopped by itself");
+        ),
+        WorkerEnd::RecordingEnded => tracing::info!("the recording is full: the session ends"),
+        WorkerEnd::Stopped if worker_ended => tracing::warn!("the extractor thread stopped by itself"),
+        WorkerEnd::Stopped => {}
     }
     save_snapshot(&map, config).await.context("saving the map at shutdown")?;
     // Unregistered so the master stops naming polymap to peers; a master that does not answer
@@ -189,7 +223,9 @@ pub async fn run(config: &Config, duration: Option<Duration>) -> Result<status::
     {
         tracing::warn!("ROS 1: the master did not take the unregistrations within 2 s");
     }
-    Ok(report(&all_latencies))
+    let report = report(&all_latencies);
+    let recorded = recorded.transpose().context("recording")?;
+    Ok((report, recorded, map))
 }
 
 /// The map snapshotted under its lock, written (slow on a full or failing disk) off it.

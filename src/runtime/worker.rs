@@ -19,6 +19,7 @@ use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use parking_lot::Mutex;
 
 use super::awaiting::{AwaitingPose, Settled, Skip};
+use super::record::Recorder;
 use super::slot::Slot;
 use super::status::Counters;
 use crate::clock::now_ns;
@@ -27,7 +28,7 @@ use crate::extract::{Extractor, FramePolygons, Polygon};
 use crate::grid::Grid;
 use crate::map::{MapPolygon, PolygonMap};
 use crate::pose::PoseBuffer;
-use crate::types::{Intrinsics, StampNs};
+use crate::types::{DepthFrame, Intrinsics, Pose, StampNs};
 
 /// What one frame made: its polygons in the map's frame, and what it changed in the map.
 pub struct FrameEvent {
@@ -50,6 +51,8 @@ pub struct FrameEvent {
 pub enum WorkerEnd {
     /// Asked to stop, or nobody listens any more.
     Stopped,
+    /// The recording is full (or its thread stopped): the session ends with it.
+    RecordingEnded,
     /// A panic: where, and whether the map is as the last frame left it.
     Panicked { during: &'static str, message: String, map_intact: bool },
 }
@@ -76,6 +79,7 @@ enum Handoff {
 pub fn spawn(
     config: &Config,
     shared: Shared,
+    recorder: Option<Recorder>,
     out: tokio::sync::mpsc::Sender<FrameEvent>,
 ) -> Result<std::thread::JoinHandle<WorkerEnd>> {
     let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<Backend, String>>();
@@ -83,6 +87,7 @@ pub fn spawn(
     let Shared { slot, stop, poses, map, counters } = shared;
     let pipeline = config.pipeline.clone();
     let (stop_x, counters_x) = (stop.clone(), counters.clone());
+    let keep_raw = recorder.is_some();
     let extractor_thread = std::thread::Builder::new().name("extractor".into()).spawn(move || {
         let mut extractor = match Extractor::new(&pipeline) {
             Ok(e) => {
@@ -94,7 +99,7 @@ pub fn spawn(
                 return;
             }
         };
-        let end = extract_frames(&mut extractor, &slot, &stop_x, &counters_x, &handoff_tx);
+        let end = extract_frames(&mut extractor, &slot, &stop_x, &counters_x, keep_raw, &handoff_tx);
         let _ = handoff_tx.send(Handoff::Ended(end));
     })?;
     match ready_rx.recv() {
@@ -103,6 +108,7 @@ pub fn spawn(
         Err(_) => return Err(anyhow!("the extractor thread ended before it started")),
     }
     let mut mapper = FrameMapper::new(config, poses, map, counters);
+    mapper.recorder = recorder;
     let map_thread = std::thread::Builder::new().name("mapper".into()).spawn(move || {
         let end = map_frames(&mut mapper, &handoff_rx, &stop, &out);
         // The extractor stops with the map thread, and is waited for.
@@ -120,6 +126,7 @@ fn extract_frames(
     slot: &Slot,
     stop: &AtomicBool,
     counters: &Counters,
+    keep_raw: bool,
     handoff: &std::sync::mpsc::SyncSender<Handoff>,
 ) -> WorkerEnd {
     while !stop.load(Ordering::Relaxed) {
@@ -134,7 +141,8 @@ fn extract_frames(
             }
             Err(panic) => return panicked("extracting a frame", panic, true),
         };
-        let extracted = Extracted { polygons, depth: stages.depth, intrinsics };
+        let raw = keep_raw.then_some(frame);
+        let extracted = Extracted { polygons, depth: stages.depth, intrinsics, raw };
         match handoff.try_send(Handoff::Frame(extracted)) {
             Ok(()) => {}
             // The map thread is a whole queue behind: this frame goes.
@@ -157,7 +165,7 @@ fn map_frames(
         // While frames wait for poses, look for new poses often; else sleep until a frame.
         let wait = if mapper.waiting() == 0 { IDLE_WAIT } else { POSE_POLL };
         match handoff.recv_timeout(wait) {
-            Ok(Handoff::Frame(f)) => mapper.queue(f.polygons, f.depth, f.intrinsics, now_ns()),
+            Ok(Handoff::Frame(f)) => mapper.queue(f, now_ns()),
             Ok(Handoff::Ended(end)) => return end,
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => return WorkerEnd::Stopped,
@@ -170,6 +178,9 @@ fn map_frames(
             if out.blocking_send(event).is_err() {
                 return WorkerEnd::Stopped;
             }
+        }
+        if mapper.recording_ended {
+            return WorkerEnd::RecordingEnded;
         }
     }
     WorkerEnd::Stopped
@@ -190,6 +201,8 @@ pub struct Extracted {
     /// The depth in metres, which clears the map where the frame sees through it.
     pub depth: Grid<f32>,
     pub intrinsics: Intrinsics,
+    /// The frame as the camera gave it, kept only while recording.
+    pub raw: Option<DepthFrame>,
 }
 
 /// Extracted frames to the map: each waits for the pose at its stamp (never holding up the
@@ -200,6 +213,10 @@ pub struct FrameMapper {
     poses: Arc<Mutex<PoseBuffer>>,
     map: Arc<Mutex<PolygonMap>>,
     pub counters: Arc<Counters>,
+    /// Where mapped frames are recorded, if they are.
+    pub recorder: Option<Recorder>,
+    /// The recorder took its last frame: no more frames are mapped.
+    pub recording_ended: bool,
 }
 
 impl FrameMapper {
@@ -216,6 +233,8 @@ impl FrameMapper {
             poses,
             map,
             counters,
+            recorder: None,
+            recording_ended: false,
         }
     }
 
@@ -225,11 +244,8 @@ impl FrameMapper {
     }
 
     /// Queues a frame extracted at local time `now_ns` for its pose.
-    pub fn queue(&mut self, polygons: FramePolygons, depth: Grid<f32>, intrinsics: Intrinsics, now_ns: StampNs) {
-        let stamp_ns = polygons.stamp_ns;
-        if let Some(Settled::Skipped(_, why)) =
-            self.awaiting.push(stamp_ns, Extracted { polygons, depth, intrinsics }, now_ns)
-        {
+    pub fn queue(&mut self, frame: Extracted, now_ns: StampNs) {
+        if let Some(Settled::Skipped(_, why)) = self.awaiting.push(frame.polygons.stamp_ns, frame, now_ns) {
             self.counters.count_skip(why);
         }
     }
@@ -240,11 +256,15 @@ impl FrameMapper {
         let settled = self.awaiting.settle(&mut self.poses.lock(), now_ns);
         let mut events = Vec::new();
         for s in settled {
+            if self.recording_ended {
+                break;
+            }
             match s {
-                Settled::Posed(frame, world_body) => {
+                Settled::Posed(mut frame, world_body) => {
+                    let t_world_camera = world_camera(&world_body, &self.body_camera);
                     let mut map = self.map.lock();
                     let updated = std::panic::catch_unwind(AssertUnwindSafe(|| {
-                        update_map(&mut map, &frame, &world_body, &self.body_camera)
+                        update_map(&mut map, &frame, &world_body, &t_world_camera)
                     }));
                     drop(map);
                     match updated {
@@ -252,6 +272,10 @@ impl FrameMapper {
                         Err(panic) => return Err(panicked("updating the map", panic, false)),
                     }
                     self.counters.processed.fetch_add(1, Ordering::Relaxed);
+                    if let (Some(recorder), Some(raw)) = (&mut self.recorder, frame.raw.take()) {
+                        let pose = Pose { stamp_ns: raw.stamp_ns, transform: t_world_camera };
+                        self.recording_ended = !recorder.record(raw, frame.intrinsics, pose);
+                    }
                 }
                 Settled::Skipped(frame, why) => {
                     self.counters.count_skip(why);
@@ -268,12 +292,11 @@ fn update_map(
     m: &mut PolygonMap,
     frame: &Extracted,
     world_body: &Isometry3<f64>,
-    body_camera: &Isometry3<f64>,
+    t_world_camera: &Isometry3<f64>,
 ) -> FrameEvent {
-    let t_world_camera = world_body * body_camera;
     let from_version = m.version();
-    let update = m.update(&frame.polygons.polygons, &t_world_camera, &frame.intrinsics, Some(&frame.depth));
-    let corrected = m.corrected(&t_world_camera);
+    let update = m.update(&frame.polygons.polygons, t_world_camera, &frame.intrinsics, Some(&frame.depth));
+    let corrected = m.corrected(t_world_camera);
     let robot = m.corrected(world_body).translation.vector;
     let version = m.version();
     let mut polygons_of = |ids: &[u64]| ids.iter().filter_map(|&id| m.polygon(id)).collect::<Vec<_>>();
@@ -299,6 +322,14 @@ fn panicked(during: &'static str, panic: Box<dyn std::any::Any + Send>, map_inta
         .unwrap_or_else(|| "(no message)".into());
     tracing::error!("the extractor thread panicked {during}: {message}");
     WorkerEnd::Panicked { during, message, map_intact }
+}
+
+/// T_world_camera of a frame: the body's pose and the camera's mount, the rotation made
+/// unit again (a recording writes it, and it must read back as it was used).
+pub fn world_camera(world_body: &Isometry3<f64>, body_camera: &Isometry3<f64>) -> Isometry3<f64> {
+    let mut t = world_body * body_camera;
+    t.rotation.renormalize();
+    t
 }
 
 /// T_body_camera from the config.
