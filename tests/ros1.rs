@@ -700,33 +700,7 @@ fn depth_from_a_ros_topic_gives_the_sequence_s_polygons_frame_by_frame() {
     eprintln!("{} of {} frames sent were mapped", frames.len(), v["sent"]);
     assert!(frames.len() >= 15, "{} of {} frames mapped:\n{log_text}", frames.len(), v["sent"]);
 
-    let config = polymap::config::Config::default();
-    let mut extractor = polymap::extract::Extractor::new(&polymap::config::PipelineConfig {
-        backend: polymap::config::Backend::Cpu,
-        ..config.pipeline.clone()
-    })
-    .unwrap();
-    let mut worst = 0.0f64;
-    let mut polygons = 0;
-    for f in frames {
-        let k = f["k"].as_u64().unwrap() as usize;
-        let drift = f["drift_z"].as_f64().expect("the frame's map update");
-        let (extracted, _, _) = extractor.extract(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
-        let t = nalgebra::Translation3::new(0.0, 0.0, -drift) * seq.poses[k].transform;
-        let offline: Vec<_> = extracted.polygons.iter().map(|p| p.transformed(&t)).collect();
-        let offline = polymap::interface::convert::frame_polygons(0, "map", &offline);
-        let live = f["polygons"].as_array().unwrap();
-        assert_eq!(live.len(), offline.polygons.len(), "frame {k}: polygons live and offline");
-        for (l, o) in live.iter().zip(&offline.polygons) {
-            let l = l.as_array().unwrap();
-            assert_eq!(l.len(), o.boundary.len(), "frame {k}: outline lengths");
-            for (a, b) in l.iter().zip(&o.boundary) {
-                let a: Vec<f64> = a.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
-                worst = worst.max((a[0] - b.x).abs()).max((a[1] - b.y).abs()).max((a[2] - b.z).abs());
-            }
-        }
-        polygons += live.len();
-    }
+    let (polygons, worst) = common::frames_against_sequence(frames, &seq);
     eprintln!("{polygons} polygons in {} frames: worst vertex difference {worst:.2e} m", frames.len());
     assert!(polygons >= 3 * frames.len(), "{polygons} polygons");
     assert!(worst < 1e-6, "a vertex {worst} m off");

@@ -14,12 +14,12 @@ use std::time::Duration;
 
 use polymap::ros2::session::{free_loopback_port, loopback, loopback_json5};
 
+mod common;
+
+use common::root;
+
 fn python() -> String {
     std::env::var("POLYMAP_PYTHON").expect("POLYMAP_PYTHON: a python with eclipse-zenoh and rosbags (scripts/test.sh)")
-}
-
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
 /// `polymap run` with the mock camera at 8 Hz and the mock D435i, listening on `port`;
@@ -223,4 +223,59 @@ async fn in_bridge_mode_polymap_announces_itself_as_zenoh_bridge_ros2dds_does() 
     expect("/@ros2_lv/MS/odometry/nav_msgs§msg§Odometry/:1:0:0,100");
     expect("/@ros2_lv/SS/polymap§leju§get_map/polymap_msgs§srv§GetMap");
     expect("/@ros2_lv/MP/camera§camera§imu/sensor_msgs§msg§Imu/");
+}
+
+/// Depth from a ROS 2 image topic (`sources.depth.kind = "ros"`), published by a node on
+/// rmw_zenoh as realsense-ros publishes the L515's, with VINS's poses on /odometry: every
+/// frame polymap maps has the polygons the same frame of the sequence gives offline, to the
+/// micrometre; an RGB image and one that does not fit its camera_info are refused and counted.
+#[test]
+fn depth_from_a_ros_2_topic_gives_the_sequence_s_polygons_frame_by_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_loopback_port().unwrap();
+    let seq_dir = root().join("mock_frames/straight_320");
+    let seq = polymap::sequence::Sequence::open(&seq_dir).unwrap();
+    let zenoh = dir.path().join("mapper.json5");
+    std::fs::write(&zenoh, loopback_json5(Some(port), &[])).unwrap();
+    let config = dir.path().join("mapper.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[sources.depth]\nkind = \"ros\"\nimage_unit_m = {}\n[sources.d435i]\nkind = \"none\"\n\
+             [pipeline]\nbackend = \"cpu\"\n[zenoh]\nconfig_file = {:?}\n",
+            seq.intrinsics.depth_scale,
+            zenoh.display().to_string(),
+        ),
+    )
+    .unwrap();
+    let mapper = Command::new(env!("CARGO_BIN_EXE_polymap"))
+        .args(["run", "--duration", "20", "--config"])
+        .arg(&config)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::fs::File::create(dir.path().join("mapper.log")).unwrap())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_secs(2));
+    let out = Command::new(python())
+        .arg(root().join("tests/peer/ros2_depth.py"))
+        .args(["--connect", &format!("tcp/127.0.0.1:{port}"), "--namespace", "/polymap/leju", "--sequence"])
+        .arg(&seq_dir)
+        .output()
+        .unwrap();
+    let report = mapper.wait_with_output().unwrap();
+    let log = std::fs::read_to_string(dir.path().join("mapper.log")).unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "peer: {stdout}\n{}\n{log}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    let frames = v["frames"].as_array().unwrap();
+    eprintln!("{} of {} frames sent were mapped", frames.len(), v["sent"]);
+    assert!(frames.len() >= 15, "{} of {} frames mapped:\n{log}", frames.len(), v["sent"]);
+    let (polygons, worst) = common::frames_against_sequence(frames, &seq);
+    eprintln!("{polygons} polygons in {} frames: worst vertex difference {worst:.2e} m", frames.len());
+    assert!(polygons >= 3 * frames.len(), "{polygons} polygons");
+    assert!(worst < 1e-6, "a vertex {worst} m off");
+    assert!(log.contains("encoding \"rgb8\" is not a depth image"), "{log}");
+    assert!(log.contains("but its camera_info says"), "{log}");
+    let report = String::from_utf8_lossy(&report.stdout);
+    assert!(report.contains("frames not extracted 2"), "{report}");
 }

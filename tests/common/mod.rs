@@ -174,3 +174,35 @@ pub async fn settled_map(get_map: &Client<GetMap>) -> Map {
         last_version = Some(m.version);
     }
 }
+
+/// A depth source test's frames, as its camera peer prints them (each frame polymap mapped:
+/// its index `k` in `seq`, the map's `drift_z` then, and the frame polygons' outlines)
+/// against the same frames extracted offline with the CPU twin, posed by the sequence less
+/// the drift: (polygons compared, the worst vertex difference in metres). Every frame must
+/// have as many polygons, with as long outlines, as offline.
+pub fn frames_against_sequence(frames: &[serde_json::Value], seq: &polymap::sequence::Sequence) -> (usize, f64) {
+    let config = Config::default();
+    let pipeline = polymap::config::PipelineConfig { backend: polymap::config::Backend::Cpu, ..config.pipeline };
+    let mut extractor = polymap::extract::Extractor::new(&pipeline).unwrap();
+    let (mut worst, mut polygons) = (0.0f64, 0);
+    for f in frames {
+        let k = f["k"].as_u64().unwrap() as usize;
+        let drift = f["drift_z"].as_f64().expect("the frame's map update");
+        let (extracted, _, _) = extractor.extract(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
+        let t = nalgebra::Translation3::new(0.0, 0.0, -drift) * seq.poses[k].transform;
+        let offline: Vec<_> = extracted.polygons.iter().map(|p| p.transformed(&t)).collect();
+        let offline = polymap::interface::convert::frame_polygons(0, "map", &offline);
+        let live = f["polygons"].as_array().unwrap();
+        assert_eq!(live.len(), offline.polygons.len(), "frame {k}: polygons live and offline");
+        for (l, o) in live.iter().zip(&offline.polygons) {
+            let l = l.as_array().unwrap();
+            assert_eq!(l.len(), o.boundary.len(), "frame {k}: outline lengths");
+            for (a, b) in l.iter().zip(&o.boundary) {
+                let a: Vec<f64> = a.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+                worst = worst.max((a[0] - b.x).abs()).max((a[1] - b.y).abs()).max((a[2] - b.z).abs());
+            }
+        }
+        polygons += live.len();
+    }
+    (polygons, worst)
+}

@@ -25,6 +25,7 @@ import time
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "examples" / "python"))
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 
+import ros2_msgs as msgs  # noqa: E402
 from rmw_zenoh import Peer  # noqa: E402
 from vins_schedule import Schedule  # noqa: E402
 from rosbags.typesys import get_types_from_msg  # noqa: E402
@@ -137,24 +138,10 @@ def run(peer, args):
 
     schedule = Schedule(args.sequence)
     put = peer.publisher("/odometry", "nav_msgs/msg/Odometry", qos="::,100:,:,:,,")
-    Odometry = peer.msg("nav_msgs/msg/Odometry")
     m = peer.store.types
-    Header, Time = m["std_msgs/msg/Header"], m["builtin_interfaces/msg/Time"]
-    import numpy as np
 
     def odometry(stamp, p, q):
-        return Odometry(
-            header=Header(stamp=Time(sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000), frame_id="world"),
-            child_frame_id="body",
-            pose=m["geometry_msgs/msg/PoseWithCovariance"](
-                pose=m["geometry_msgs/msg/Pose"](
-                    position=m["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2]),
-                    orientation=m["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])),
-                covariance=np.zeros(36)),
-            twist=m["geometry_msgs/msg/TwistWithCovariance"](
-                twist=m["geometry_msgs/msg/Twist"](linear=m["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
-                                                   angular=m["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)),
-                covariance=np.zeros(36)))
+        return msgs.odometry(m, stamp, p, q)
 
     published = 0
     start = time.time()
