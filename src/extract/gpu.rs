@@ -9,12 +9,12 @@
 
 use wgpu::util::DeviceExt;
 
-use super::cpu::morphology::closing_passes;
-use super::cpu::normals::{NormalPlanes, sobel_kernel};
 use super::cpu::ransac::{PointBatch, ScoringBatch};
+use super::params::Access::{Read, ReadWrite, Uniform};
+use super::params::*;
 use super::segment::Segmentation;
-use super::{Grid, Images, MIN_REGION_PIXELS};
 use crate::config::PipelineConfig;
+use crate::grid::Grid;
 use crate::types::{DepthFrame, Intrinsics};
 
 /// Why the GPU backend could not start or run.
@@ -46,182 +46,6 @@ pub const DIFFUSION_MAX_LINE: u32 = 2047;
 
 /// The workgroup memory that holds it: four arrays of 2048 f32.
 const DIFFUSION_WORKGROUP_BYTES: u32 = 4 * 4 * (DIFFUSION_MAX_LINE + 1);
-
-/// The uniform of shaders/diffusion.wgsl, field by field its `DiffusionParams`: one
-/// pass of implicit solves along every row or every column of the image.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct DiffusionParams {
-    /// Pixels along a line.
-    pub len: u32,
-    pub lines: u32,
-    /// Index of line k's first pixel: k * line_stride.
-    pub line_stride: u32,
-    /// From one pixel of a line to the next.
-    pub elem_stride: u32,
-    /// The step's time.
-    pub step: f32,
-    pub inv_kappa: f32,
-}
-
-/// The uniform of shaders/metres.wgsl, field by field its `MetresParams`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct MetresParams {
-    pub width: u32,
-    pub height: u32,
-    /// Metres per depth unit (the frame's `depth_scale`).
-    pub scale: f32,
-    pub pad: u32,
-}
-
-/// The uniform of shaders/normals.wgsl, field by field its `NormalsParams`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct NormalsParams {
-    pub width: u32,
-    pub height: u32,
-    /// Half the Sobel kernel's side.
-    pub radius: u32,
-    /// The kernel's derivative normalisation (`sobel_kernel`'s third value).
-    pub norm: f32,
-    pub fx: f32,
-    pub fy: f32,
-    pub cx: f32,
-    pub cy: f32,
-}
-
-/// The uniform of shaders/gradient.wgsl and shaders/classify.wgsl, field by field their `CannyParams`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct CannyParams {
-    pub width: u32,
-    pub height: u32,
-    /// The double threshold on the gradient's magnitude.
-    pub low: f32,
-    pub high: f32,
-}
-
-/// The uniform of shaders/ransac.wgsl, field by field its `RansacParams`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct RansacParams {
-    pub hypotheses: u32,
-    pub regions: u32,
-    pub inlier_distance: f32,
-    /// Scoring points in all (the length of each coordinate's plane).
-    pub points: u32,
-}
-
-/// The uniform of shaders/morphology.wgsl, field by field its `MorphologyParams`: one
-/// axis of a square dilation or erosion.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct MorphologyParams {
-    pub width: u32,
-    pub height: u32,
-    pub radius: u32,
-    /// 0 along rows, 1 along columns.
-    pub axis: u32,
-    /// 0 any pixel of the window (dilation), 1 all of them (erosion).
-    pub all: u32,
-    /// The value of pixels beyond the border.
-    pub outside: u32,
-}
-
-/// The uniform of shaders/boundary.wgsl, field by field its `BoundaryParams`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct BoundaryParams {
-    pub width: u32,
-    pub height: u32,
-    pub depth_edge_ratio: f32,
-    pub pad: u32,
-}
-
-/// The uniform of shaders/components.wgsl, field by field its `ComponentsParams`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct ComponentsParams {
-    pub width: u32,
-    pub height: u32,
-    /// 1: the components of the nonzero mask pixels; 0: of the zero ones.
-    pub inside_nonzero: u32,
-    pub pad: u32,
-}
-
-/// How a shader declares one binding of its group 0.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Access {
-    Uniform,
-    Read,
-    ReadWrite,
-}
-
-/// One WGSL file: its source and its group 0, binding by binding. Every entry point of
-/// the file shares that one layout (the unit test holds the list to the shader).
-pub struct ShaderFile {
-    pub name: &'static str,
-    pub source: &'static str,
-    pub bindings: &'static [Access],
-}
-
-use Access::{Read, ReadWrite, Uniform};
-
-pub const METRES: ShaderFile = ShaderFile {
-    name: "metres",
-    source: include_str!("../../shaders/metres.wgsl"),
-    bindings: &[Uniform, Read, ReadWrite],
-};
-pub const DIFFUSION: ShaderFile = ShaderFile {
-    name: "diffusion",
-    source: include_str!("../../shaders/diffusion.wgsl"),
-    bindings: &[Uniform, Read, ReadWrite],
-};
-pub const NORMALS: ShaderFile = ShaderFile {
-    name: "normals",
-    source: include_str!("../../shaders/normals.wgsl"),
-    bindings: &[Uniform, Read, Read, ReadWrite],
-};
-pub const GRADIENT: ShaderFile = ShaderFile {
-    name: "gradient",
-    source: include_str!("../../shaders/gradient.wgsl"),
-    bindings: &[Uniform, Read, ReadWrite, ReadWrite],
-};
-pub const CLASSIFY: ShaderFile = ShaderFile {
-    name: "classify",
-    source: include_str!("../../shaders/classify.wgsl"),
-    bindings: &[Uniform, Read, Read, ReadWrite],
-};
-pub const COMPONENTS: ShaderFile = ShaderFile {
-    name: "components",
-    source: include_str!("../../shaders/components.wgsl"),
-    bindings: &[Uniform, Read, ReadWrite, ReadWrite],
-};
-pub const HYSTERESIS: ShaderFile = ShaderFile {
-    name: "hysteresis",
-    source: include_str!("../../shaders/hysteresis.wgsl"),
-    bindings: &[Uniform, Read, Read, ReadWrite, ReadWrite],
-};
-pub const MORPHOLOGY: ShaderFile = ShaderFile {
-    name: "morphology",
-    source: include_str!("../../shaders/morphology.wgsl"),
-    bindings: &[Uniform, Read, ReadWrite],
-};
-pub const BOUNDARY: ShaderFile = ShaderFile {
-    name: "boundary",
-    source: include_str!("../../shaders/boundary.wgsl"),
-    bindings: &[Uniform, Read, Read, Read, Read, Read, ReadWrite],
-};
-pub const RANSAC: ShaderFile = ShaderFile {
-    name: "ransac",
-    source: include_str!("../../shaders/ransac.wgsl"),
-    bindings: &[Uniform, Read, Read, Read, ReadWrite],
-};
-
-/// Every shader file, for the layout test.
-pub const SHADERS: [&ShaderFile; 10] =
-    [&METRES, &DIFFUSION, &NORMALS, &GRADIENT, &CLASSIFY, &COMPONENTS, &HYSTERESIS, &MORPHOLOGY, &BOUNDARY, &RANSAC];
 
 /// A compiled shader file: its group 0 layout and a pipeline per entry point used.
 struct Shader {
@@ -704,8 +528,7 @@ impl Gpu {
     fn write_uniforms(&self, w: u32, h: u32, intr: Option<&Intrinsics>, cfg: &PipelineConfig) {
         let f = self.frame.as_ref().expect("frame_for before");
         let q = &self.queue;
-        let (step, inv_kappa) =
-            (cfg.diffusion_time as f32 / diffusion_steps(cfg).max(1) as f32, 1.0 / cfg.diffusion_kappa_m as f32);
+        let DiffusionSchedule { step, inv_kappa, .. } = DiffusionSchedule::of(cfg);
         let rows = DiffusionParams { len: w, lines: h, line_stride: w, elem_stride: 1, step, inv_kappa };
         let columns = DiffusionParams { len: h, lines: w, line_stride: 1, elem_stride: w, step, inv_kappa };
         q.write_buffer(&f.diffusion_params[0], 0, bytemuck::bytes_of(&rows));
@@ -834,7 +657,7 @@ impl Gpu {
         // A diffusion step: rows from depth a into b, then columns from b back into a, a
         // workgroup a line.
         let diffuse = self.diffusion.entry("main");
-        let steps: Vec<Dispatch> = (0..diffusion_steps(cfg))
+        let steps: Vec<Dispatch> = (0..DiffusionSchedule::of(cfg).steps)
             .flat_map(|_| [(diffuse, &g.diffusion[0], [h, 1]), (diffuse, &g.diffusion[1], [w, 1])])
             .collect();
         // Metres uploaded: an empty pass, so that every timestamp is written.
@@ -1052,11 +875,6 @@ impl Gpu {
 
 /// One dispatch: a pipeline, its bind group, and the workgroups along x and y.
 type Dispatch<'a> = (&'a wgpu::ComputePipeline, &'a wgpu::BindGroup, [u32; 2]);
-
-/// The diffusion's steps: none when there is no time to diffuse for.
-fn diffusion_steps(cfg: &PipelineConfig) -> u32 {
-    if cfg.diffusion_time > 0.0 { cfg.diffusion_steps } else { 0 }
-}
 
 #[cfg(test)]
 mod tests {

@@ -12,6 +12,7 @@ pub mod contours;
 pub mod cpu;
 pub mod debug;
 pub mod gpu;
+pub mod params;
 pub mod polygon;
 pub mod segment;
 pub mod trim;
@@ -20,14 +21,13 @@ pub mod uncertainty;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use serde::Serialize;
-
 use crate::config::{Backend, PipelineConfig};
 pub use crate::grid::Grid;
 use crate::types::{DepthFrame, Intrinsics};
 use cloud::Cloud;
 use contours::Region;
 use cpu::ransac::{PlaneFit, PointBatch};
+pub use params::{Images, MIN_REGION_PIXELS, StageTimes};
 pub use polygon::{FramePolygons, Polygon, VertexKind, build_polygons};
 use segment::{Creases, MAX_SAMPLE_POINTS, PointSample, Segmentation};
 
@@ -42,36 +42,6 @@ pub enum ExtractError {
     Gpu(#[from] gpu::GpuError),
 }
 
-/// Milliseconds spent in each stage of one frame.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct StageTimes {
-    /// On the CPU, depth units to metres; on the GPU, writing the raw depth into its
-    /// buffer and its conversion there (the CPU's own conversion overlaps the GPU's work).
-    pub upload: f64,
-    pub diffusion: f64,
-    pub normals: f64,
-    /// Gradient, classes, hysteresis and the closed boundary.
-    pub edges: f64,
-    /// Connected components of the pixels inside the boundary, numbered (on the GPU
-    /// twin: the components' GPU time and the CPU's numbering of the roots read back),
-    /// and the rays of the frame's points (`Cloud`) on either twin.
-    pub regions: f64,
-    /// GPU only: from the upload to the numbered regions on the CPU, less the stages' GPU
-    /// time and the numbering: the submit, waiting and mapping, the gaps between the
-    /// passes, the images' copies when kept, and the CPU's own conversion to metres where
-    /// it outlasts the GPU's work (all of it where the adapter has no timestamps, the
-    /// stages then reading 0).
-    pub readback: f64,
-    /// Region clean-up (splits, joins, growth) and outlines.
-    pub contours: f64,
-    pub ransac: f64,
-    pub polygons: f64,
-    pub total: f64,
-    /// GPU only, and where the adapter has timestamps: the GPU's time for the per-pixel
-    /// stages, from the first one's start to the last one's end (0 otherwise).
-    pub gpu_busy: f64,
-}
-
 /// What a frame went through, for the map, debug pictures and the twin comparisons.
 #[derive(Clone, Debug)]
 pub struct Stages {
@@ -83,21 +53,6 @@ pub struct Stages {
     pub regions: Vec<Region>,
     pub fits: Vec<Option<PlaneFit>>,
 }
-
-/// The images of the per-pixel stages.
-#[derive(Clone, Debug)]
-pub struct Images {
-    pub smoothed: Grid<f32>,
-    /// The normals as planes (`NormalPlanes::interleaved` gives them back as the GPU writes them).
-    pub normals: cpu::normals::NormalPlanes,
-    /// Canny edges after hysteresis.
-    pub canny: Grid<u8>,
-    /// Closed edge lines (Canny + depth steps) plus no-normal pixels: 1 = not inside any region.
-    pub boundary: Grid<u8>,
-}
-
-/// Smallest region worth a plane fit, pixels (the area test comes after the fit).
-pub const MIN_REGION_PIXELS: usize = 30;
 
 /// Depth units to metres (0 stays invalid), checking the frame against the intrinsics.
 pub fn depth_metres(frame: &DepthFrame, intr: &Intrinsics) -> Result<Grid<f32>, ExtractError> {

@@ -4,9 +4,8 @@
 //! passes pixel by pixel, one function per entry point.
 
 use super::ROWS_PER_TASK;
-use super::morphology::{close, closing_passes, morphology_at};
-use super::normals::NormalPlanes;
-use crate::extract::gpu::BoundaryParams;
+use super::morphology::{close, morphology_at};
+use crate::extract::params::{BoundaryParams, NormalPlanes, closing_passes};
 use crate::grid::{Grid, par_rows, rows_around};
 
 /// 1 where the pixel cannot be inside a planar region: the closed edge lines (Canny,

@@ -9,8 +9,8 @@
 use rayon::prelude::*;
 
 use super::components::hysteresis;
-use super::normals::NormalPlanes;
 use super::{ROWS_PER_TASK, widest_simd};
+use crate::extract::params::NormalPlanes;
 use crate::grid::{Grid, par_rows};
 
 /// The gradient of the normal field as shaders/gradient.wgsl writes it: a plane of

@@ -22,6 +22,7 @@ use std::ops::Range;
 use rayon::prelude::*;
 
 use crate::extract::Grid;
+use crate::extract::params::DiffusionSchedule;
 
 /// exp(-(d/kappa)^2) as 2^-t: the integer part of t by the exponent bits, the
 /// fraction by a degree-4 minimax polynomial of 2^-f on [0, 1) (under 3e-6; with the
@@ -53,11 +54,10 @@ pub fn coupling(z: f32, q: f32, step: f32, inv_kappa: f32) -> f32 {
 /// steps of 0.2 are 12) in `steps` semi-implicit steps. No steps or no time: unchanged.
 pub fn diffuse(depth: &Grid<f32>, time: f32, steps: u32, kappa: f32) -> Grid<f32> {
     let mut u = depth.clone();
-    if steps == 0 || time <= 0.0 || u.data.is_empty() {
+    let DiffusionSchedule { steps, step, inv_kappa } = DiffusionSchedule::new(time, steps, kappa);
+    if steps == 0 || u.data.is_empty() {
         return u;
     }
-    let step = time / steps as f32;
-    let inv_kappa = 1.0 / kappa;
     // The column pass cannot write where it reads (other stripes still read those rows):
     // it writes this second image, and the two swap.
     let mut next = Vec::new();

@@ -10,7 +10,7 @@ pub mod ransac;
 pub mod separable;
 pub mod simd;
 
-use super::{Images, StageTimes};
+use super::params::{Images, StageTimes};
 use crate::config::PipelineConfig;
 use crate::grid::Grid;
 use crate::types::Intrinsics;
@@ -42,8 +42,7 @@ pub fn image_stages(
     Images { smoothed, normals, canny, boundary }
 }
 
-/// Rows per rayon task in the per-row loops: one row is too little work to be worth a thread hop.
-pub(crate) const ROWS_PER_TASK: usize = 8;
+pub(crate) use super::params::ROWS_PER_TASK;
 
 pub(crate) use simd::widest_simd;
 

@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use crate::extract::gpu::MorphologyParams;
+use crate::extract::params::MorphologyParams;
 use crate::grid::{Grid, par_rows};
 
 /// Morphological close (dilate, then erode) with a `size` x `size` square; outside the
@@ -102,16 +102,10 @@ pub fn morphology_at(p: &MorphologyParams, src: &[u8], i: usize) -> u8 {
     if p.all == 1 { all } else { any }
 }
 
-/// The square passes of a morphological close: dilation then erosion, each rows then
-/// columns; outside the image counts as set, so closing never eats into the border.
-pub fn closing_passes(width: u32, height: u32, size: u32) -> [MorphologyParams; 4] {
-    let pass = |axis, all| MorphologyParams { width, height, radius: size / 2, axis, all, outside: 1 };
-    [pass(0, 0), pass(1, 0), pass(0, 1), pass(1, 1)]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::extract::params::closing_passes;
 
     #[test]
     fn fast_dilation_and_erosion_are_the_oracle_s_passes() {

@@ -7,66 +7,16 @@
 //! implementation dropped the Z terms' coupling to the ray; this does not.
 //! A pixel with any invalid tap gets the zero normal.
 
-use rayon::prelude::*;
-
 use super::{ROWS_PER_TASK, morphology, separable};
 use crate::extract::Grid;
+use crate::extract::params::{NormalPlanes, sobel_kernel};
 use crate::grid::par_rows;
 use crate::types::Intrinsics;
-
-/// Separable Sobel weights (smoothing, derivative) and the derivative's response to a
-/// unit ramp times the smoothing sum, by kernel size.
-pub fn sobel_kernel(size: u32) -> (&'static [f32], &'static [f32], f32) {
-    match size {
-        3 => (&[1.0, 2.0, 1.0], &[-1.0, 0.0, 1.0], 8.0),
-        5 => (&[1.0, 4.0, 6.0, 4.0, 1.0], &[-1.0, -2.0, 0.0, 2.0, 1.0], 128.0),
-        7 => (&[1.0, 6.0, 15.0, 20.0, 15.0, 6.0, 1.0], &[-1.0, -4.0, -5.0, 0.0, 5.0, 4.0, 1.0], 2048.0),
-        _ => panic!("Sobel kernel size {size} is not 3, 5 or 7 (the config validates this)"),
-    }
-}
 
 /// Unit normals in the camera frame, [0, 0, 0] where not every tap is valid, interleaved
 /// (as shaders/normals.wgsl writes them).
 pub fn normals(depth: &Grid<f32>, intr: &Intrinsics, kernel: u32) -> Grid<[f32; 3]> {
     normal_planes(depth, intr, kernel).interleaved()
-}
-
-/// Normals as planes, for the gradient: row v is [x; w] [y; w] [z; w] [1 where a normal,
-/// else 0; w], so each of the gradient's row loops runs over plain slices and vectorises.
-#[derive(Clone, Debug, PartialEq)]
-pub struct NormalPlanes {
-    pub width: usize,
-    pub height: usize,
-    pub data: Vec<f32>,
-}
-
-impl NormalPlanes {
-    /// The planes of interleaved normals (the normals stage writes both at once).
-    pub fn of(normals: &Grid<[f32; 3]>) -> NormalPlanes {
-        let w = normals.width;
-        let mut data = vec![0.0f32; 4 * w * normals.height];
-        data.par_chunks_mut(4 * w).zip(normals.data.par_chunks(w)).with_min_len(ROWS_PER_TASK).for_each(
-            |(planes, row)| {
-                for (u, n) in row.iter().enumerate() {
-                    planes[u] = n[0];
-                    planes[w + u] = n[1];
-                    planes[2 * w + u] = n[2];
-                    planes[3 * w + u] = f32::from(u8::from(*n != [0.0; 3]));
-                }
-            },
-        );
-        NormalPlanes { width: w, height: normals.height, data }
-    }
-
-    /// The normals interleaved again, as the GPU stage writes them (for pictures and the
-    /// GPU twin's inputs; the frame itself reads only the planes).
-    pub fn interleaved(&self) -> Grid<[f32; 3]> {
-        let w = self.width;
-        let data = (self.data.chunks(4 * w))
-            .flat_map(|row| (0..w).map(move |u| [row[u], row[w + u], row[2 * w + u]]))
-            .collect();
-        Grid { width: w, height: self.height, data }
-    }
 }
 
 /// The normals stage: `normals` as planes, the only form the frame reads (the gradient,

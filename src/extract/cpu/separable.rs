@@ -143,7 +143,7 @@ mod tests {
         let (w, h) = (40, 30);
         let z: Vec<f32> = (0..w * h).map(|i| 1.5 + 0.0123 * (i % w) as f32 + 0.0071 * (i / w) as f32).collect();
         for size in [3, 5, 7] {
-            let (smooth, deriv, _) = crate::extract::cpu::normals::sobel_kernel(size);
+            let (smooth, deriv, _) = crate::extract::params::sobel_kernel(size);
             let r = smooth.len() / 2;
             let (du, dv) = (derivative_u(&z, w, h, deriv, smooth), derivative_v(&z, w, h, deriv, smooth));
             for v in r..h - r {
