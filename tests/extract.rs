@@ -4,7 +4,7 @@
 use nalgebra::Vector3;
 use polymap::config::PipelineConfig;
 use polymap::extract::cloud::Cloud;
-use polymap::extract::cpu::{canny, diffusion, morphology, normals, ransac};
+use polymap::extract::cpu::{classify, diffusion, gradient, morphology, normals, ransac};
 use polymap::extract::{ExtractError, Grid, extract_cpu};
 use polymap::synth::{NoiseModel, Scene, SceneKind, noisy_depth, path::trajectory, render};
 use polymap::types::{DepthFrame, Intrinsics};
@@ -179,7 +179,7 @@ fn canny_finds_the_fold_between_two_planes_and_nothing_on_one() {
     let i = intr(80, 60);
     let flat = plane_depth(&i, Vector3::new(0.0, -0.6, -0.8), 1.2);
     let n = normals::normals(&flat, &i, 5);
-    let edges = canny::canny(&canny::normal_gradient(&n), 0.05, 0.1);
+    let edges = classify::canny(&gradient::normal_gradient(&n), 0.05, 0.1);
     assert_eq!(edges.data.iter().filter(|&&e| e != 0).count(), 0, "a plane has no edges");
 
     // A valley: two planes tilted 30 deg either way, meeting along the optical axis's column.
@@ -187,7 +187,7 @@ fn canny_finds_the_fold_between_two_planes_and_nothing_on_one() {
     let b = plane_depth(&i, Vector3::new(-0.5, 0.0, -0.866), 1.0);
     let roof = Grid { data: a.data.iter().zip(&b.data).map(|(x, y)| x.max(*y)).collect(), ..a };
     let n = normals::normals(&roof, &i, 5);
-    let edges = canny::canny(&canny::normal_gradient(&n), 0.05, 0.1);
+    let edges = classify::canny(&gradient::normal_gradient(&n), 0.05, 0.1);
     for v in 5..55 {
         let row: Vec<usize> = (0..80).filter(|&u| edges.data[v * 80 + u] != 0).collect();
         assert!(!row.is_empty() && row.iter().all(|&u| (36..=43).contains(&u)), "row {v}: edges at {row:?}");

@@ -9,8 +9,8 @@ use std::sync::{Mutex, OnceLock};
 
 use nalgebra::Vector3;
 use polymap::config::PipelineConfig;
-use polymap::extract::cpu::components::{self, components_oracle, dense_from_roots};
-use polymap::extract::cpu::{self, canny, diffusion, normals, ransac};
+use polymap::extract::cpu::components::{components_oracle, dense_from_roots};
+use polymap::extract::cpu::{self, classify, diffusion, gradient, hysteresis, normals, ransac};
 use polymap::extract::gpu::{DepthUpload, Gpu};
 use polymap::extract::segment::Segmentation;
 use polymap::extract::{Grid, Images, MIN_REGION_PIXELS, depth_metres, extract_cpu, extract_gpu};
@@ -209,8 +209,8 @@ fn normals_and_edges_alone_agree_with_the_cpu_twin_on_the_same_input() {
 
         // Canny's edges, from each twin's normals (equal to 1e-5: only a magnitude within
         // rounding of a threshold or a tie may flip a pixel, and hysteresis its line).
-        let class = canny::classify(&canny::gradient_of_planes(&n), cfg.canny_low as f32, cfg.canny_high as f32);
-        let share = share_differing(&components::hysteresis(&class), &g.canny);
+        let class = classify::classify(&gradient::gradient_of_planes(&n), cfg.canny_low as f32, cfg.canny_high as f32);
+        let share = share_differing(&hysteresis::hysteresis(&class), &g.canny);
         assert!(share < 0.001, "{name} frame {k}: edges differ in {:.3} % of pixels", share * 100.0);
         assert!(class.data.contains(&2), "{name} frame {k}: the stairs have strong edges");
         worst_share = worst_share.max(share);
@@ -226,8 +226,8 @@ fn cpu_inputs(step: usize) -> Vec<(String, usize, Grid<u8>, Images)> {
         .map(|(name, seq, k)| {
             let depth = depth_metres(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
             let images = cpu::image_stages(&depth, &seq.intrinsics, &cfg, &mut Default::default(), &mut || 0.0);
-            let grad = canny::gradient_of_planes(&images.normals);
-            (name, k, canny::classify(&grad, cfg.canny_low as f32, cfg.canny_high as f32), images)
+            let grad = gradient::gradient_of_planes(&images.normals);
+            (name, k, classify::classify(&grad, cfg.canny_low as f32, cfg.canny_high as f32), images)
         })
         .collect()
 }

@@ -57,17 +57,7 @@ pub struct Stages {
 /// Depth units to metres (0 stays invalid), checking the frame against the intrinsics.
 pub fn depth_metres(frame: &DepthFrame, intr: &Intrinsics) -> Result<Grid<f32>, ExtractError> {
     check_frame(frame, intr)?;
-    Ok(metres_of(frame))
-}
-
-/// `depth_metres` of a frame already checked.
-fn metres_of(frame: &DepthFrame) -> Grid<f32> {
-    let s = frame.depth_scale as f32;
-    Grid {
-        width: frame.width as usize,
-        height: frame.height as usize,
-        data: frame.pixels.iter().map(|&d| d as f32 * s).collect(),
-    }
+    Ok(cpu::metres::metres(frame))
 }
 
 /// Whether a frame is one the stages can take: the intrinsics' size, as many pixels, and
@@ -283,7 +273,7 @@ pub fn extract_with(
             // and the CPU its own copy while the GPU works.
             check_frame(frame, intr)?;
             let (out, depth) =
-                gpu.image_stages(gpu::DepthUpload::Raw(frame), intr, cfg, keep_images, || metres_of(frame))?;
+                gpu.image_stages(gpu::DepthUpload::Raw(frame), intr, cfg, keep_images, || cpu::metres::metres(frame))?;
             // The upload, the submit, the readback and the numbering.
             let ms = lap();
             let t = out.times;

@@ -193,8 +193,8 @@ pub fn boundary_oracle(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::extract::cpu::canny::canny;
-    use crate::extract::cpu::canny::normal_gradient;
+    use crate::extract::cpu::classify::canny;
+    use crate::extract::cpu::gradient::normal_gradient;
     use crate::extract::cpu::test_frames::stair_normals;
 
     #[test]

@@ -1,9 +1,15 @@
-//! The CPU twin of every GPU stage, one file per shader, in plain Rust (rayon over rows).
+//! The CPU twin of every GPU stage, in plain Rust (rayon over rows): one file per shader,
+//! named after it (metres, diffusion, normals, gradient, classify, components,
+//! hysteresis, morphology, boundary, ransac), and two helpers (`separable` convolutions,
+//! `simd`'s widest-vector dispatch).
 
 pub mod boundary;
-pub mod canny;
+pub mod classify;
 pub mod components;
 pub mod diffusion;
+pub mod gradient;
+pub mod hysteresis;
+pub mod metres;
 pub mod morphology;
 pub mod normals;
 pub mod ransac;
@@ -28,8 +34,9 @@ pub fn image_stages(
     times.diffusion = lap();
     let normals = normals::normal_planes(&smoothed, intr, cfg.normal_kernel);
     times.normals = lap();
-    let class = canny::classify(&canny::gradient_of_planes(&normals), cfg.canny_low as f32, cfg.canny_high as f32);
-    let canny = components::hysteresis(&class);
+    let class =
+        classify::classify(&gradient::gradient_of_planes(&normals), cfg.canny_low as f32, cfg.canny_high as f32);
+    let canny = hysteresis::hysteresis(&class);
     let boundary = boundary::boundary(
         &canny,
         &smoothed,
