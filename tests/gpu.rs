@@ -10,7 +10,7 @@ use std::sync::{Mutex, OnceLock};
 use nalgebra::Vector3;
 use polymap::config::PipelineConfig;
 use polymap::extract::cpu::components::{components_oracle, dense_from_roots};
-use polymap::extract::cpu::{self, classify, diffusion, gradient, hysteresis, normals, ransac};
+use polymap::extract::cpu::{self, classify, diffusion, gradient, hysteresis, morphology, normals, ransac};
 use polymap::extract::gpu::{DepthUpload, Gpu};
 use polymap::extract::segment::Segmentation;
 use polymap::extract::{Grid, Images, MIN_REGION_PIXELS, depth_metres, extract_cpu, extract_gpu};
@@ -230,6 +230,56 @@ fn cpu_inputs(step: usize) -> Vec<(String, usize, Grid<u8>, Images)> {
             (name, k, classify::classify(&grad, cfg.canny_low as f32, cfg.canny_high as f32), images)
         })
         .collect()
+}
+
+/// The four stages not yet compared alone: each from the same input on both twins, on
+/// every tenth frame of every mock sequence. The diffusion and the gradient are float
+/// arithmetic the GPU may fuse (a few ulps); classify and the closing only compare and
+/// count, so they are equal exactly.
+#[test]
+fn diffusion_gradient_classify_and_closing_alone_agree_with_the_cpu_twin() {
+    let Some(gpu) = gpu() else { return };
+    let mut gpu = gpu.lock().unwrap_or_else(|e| e.into_inner());
+    let cfg = PipelineConfig::default();
+    let (mut worst_depth, mut worst_magnitude, mut worst_sectors) = (0.0f32, 0.0f32, 0.0f64);
+    let mut closed_changed = 0;
+    for (name, seq, k) in mock_frames(10) {
+        let depth = depth_metres(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
+        let smoothed =
+            diffusion::diffuse(&depth, cfg.diffusion_time as f32, cfg.diffusion_steps, cfg.diffusion_kappa_m as f32);
+        let g = gpu.diffusion_alone(&depth, &cfg).unwrap();
+        let d = max_abs_diff(&g.data, &smoothed.data);
+        assert!(d <= 2e-6, "{name} frame {k}: diffusion differs by {d} m");
+        assert!(g.data.iter().zip(&smoothed.data).all(|(a, b)| (*a == 0.0) == (*b == 0.0)), "{name} frame {k}: holes");
+        assert!(max_abs_diff(&smoothed.data, &depth.data) > 1e-3, "{name} frame {k}: the diffusion changes the depth");
+        worst_depth = worst_depth.max(d);
+
+        let planes = normals::normal_planes(&smoothed, &seq.intrinsics, cfg.normal_kernel);
+        let want = gradient::gradient_of_planes(&planes);
+        let got = gpu.gradient_alone(&planes.interleaved(), &cfg).unwrap();
+        let d = max_abs_diff(&got.magnitude.data, &want.magnitude.data);
+        assert!(d <= 1e-5, "{name} frame {k}: gradient magnitudes differ by {d}");
+        worst_magnitude = worst_magnitude.max(d);
+        // A sector is a comparison of the gradient's sums: only a tie within rounding flips it.
+        let share = got.sector.data.iter().zip(&want.sector.data).filter(|(a, b)| a != b).count() as f64
+            / want.sector.data.len() as f64;
+        assert!(share < 0.001, "{name} frame {k}: sectors differ in {:.3} % of pixels", share * 100.0);
+        worst_sectors = worst_sectors.max(share);
+
+        let class = classify::classify(&want, cfg.canny_low as f32, cfg.canny_high as f32);
+        assert_eq!(gpu.classify_alone(&want, &cfg).unwrap(), class, "{name} frame {k}: classes");
+        assert!(class.data.contains(&1) && class.data.contains(&2), "{name} frame {k}: weak and strong pixels");
+
+        let edges = hysteresis::hysteresis(&class);
+        let closed = morphology::close(&edges, cfg.closing_kernel_px);
+        assert_eq!(gpu.closing_alone(&edges, &cfg).unwrap(), closed, "{name} frame {k}: closing");
+        closed_changed += closed.data.iter().zip(&edges.data).filter(|(a, b)| a != b).count();
+    }
+    assert!(closed_changed > 100, "the closing fills {closed_changed} pixels, a closing worth comparing");
+    eprintln!(
+        "worst: smoothed depth {worst_depth:e} m, magnitude {worst_magnitude:e}, sectors differing {:.4} %",
+        worst_sectors * 100.0
+    );
 }
 
 #[test]

@@ -56,6 +56,15 @@ pub struct Images {
     pub boundary: Grid<u8>,
 }
 
+/// The gradient of the normal field as shaders/gradient.wgsl writes it: a plane of
+/// magnitudes and one of NMS sectors (0..4; 4 marks a pixel whose 3x3 neighbourhood lacks
+/// a normal, or on the image's border, magnitude 0 there).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Gradient {
+    pub magnitude: Grid<f32>,
+    pub sector: Grid<u8>,
+}
+
 /// Smallest region worth a plane fit, pixels (the area test comes after the fit).
 pub const MIN_REGION_PIXELS: usize = 30;
 

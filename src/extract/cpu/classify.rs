@@ -3,9 +3,9 @@
 //! third, is `hysteresis`).
 
 use super::ROWS_PER_TASK;
-use super::gradient::Gradient;
 use super::hysteresis::hysteresis;
 use super::widest_simd;
+use crate::extract::params::Gradient;
 use crate::grid::{Grid, par_rows};
 
 /// Offsets of the two neighbours compared in non-maximum suppression, by sector.

@@ -7,17 +7,9 @@
 use rayon::prelude::*;
 
 use super::{ROWS_PER_TASK, widest_simd};
+pub use crate::extract::params::Gradient;
 use crate::extract::params::NormalPlanes;
 use crate::grid::Grid;
-
-/// The gradient of the normal field as shaders/gradient.wgsl writes it: a plane of
-/// magnitudes and one of NMS sectors (0..4; 4 marks a pixel whose 3x3 neighbourhood lacks
-/// a normal, or on the image's border, magnitude 0 there).
-#[derive(Clone, Debug, PartialEq)]
-pub struct Gradient {
-    pub magnitude: Grid<f32>,
-    pub sector: Grid<u8>,
-}
 
 /// Gradient of the normal field (`Gradient`). The fast loop reads the normals as planes
 /// of x, y, z and validity (`NormalPlanes`, which the normals stage writes beside the
