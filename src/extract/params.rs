@@ -1,6 +1,6 @@
 //! The stage layer under both twins: each stage's parameters as its shader's uniform
-//! (`#[repr(C)]`, `Pod`; gpu.rs's tests hold each to the struct its WGSL declares), the
-//! shader table, and what the CPU twin (`cpu/`) and the GPU twin (`gpu.rs`) both need:
+//! (`#[repr(C)]`, `Pod`; gpu/'s tests hold each to the struct its WGSL declares), the
+//! shader table, and what the CPU twin (`cpu/`) and the GPU twin (`gpu/`) both need:
 //! the Sobel kernels, the closing's passes, the diffusion's schedule and the normals'
 //! planes. Both twins import from here; neither imports from the other.
 
