@@ -78,7 +78,8 @@ fn check_frame(frame: &DepthFrame, intr: &Intrinsics) -> Result<(), ExtractError
     Ok(())
 }
 
-/// Which twin runs the stages.
+/// Which twin runs the stages, with the GPU's state. A single frame takes the twin as
+/// `Option<&mut Gpu>` (`extract_with`): None is the CPU twin.
 pub enum Engine {
     Cpu,
     Gpu(Box<gpu::Gpu>),
@@ -159,8 +160,8 @@ impl Extractor {
             && let Engine::Gpu(gpu) = &mut self.engine
         {
             // The first GPU run compiles and allocates: time the second.
-            extract_with(Twin::Gpu(gpu), frame, intr, &self.cfg, keep)?;
-            let gpu_ms = extract_with(Twin::Gpu(gpu), frame, intr, &self.cfg, keep)?.2.total;
+            extract_with(Some(gpu), frame, intr, &self.cfg, keep)?;
+            let gpu_ms = extract_with(Some(gpu), frame, intr, &self.cfg, keep)?.2.total;
             let cpu = extract_cpu(frame, intr, &self.cfg)?;
             let name = gpu.describe();
             if cpu.2.total < gpu_ms {
@@ -176,11 +177,11 @@ impl Extractor {
                 cpu.2.total
             );
         }
-        let twin = match &mut self.engine {
-            Engine::Cpu => Twin::Cpu,
-            Engine::Gpu(gpu) => Twin::Gpu(gpu),
+        let gpu = match &mut self.engine {
+            Engine::Cpu => None,
+            Engine::Gpu(gpu) => Some(&mut **gpu),
         };
-        extract_with(twin, frame, intr, &self.cfg, keep)
+        extract_with(gpu, frame, intr, &self.cfg, keep)
     }
 }
 
@@ -220,19 +221,13 @@ pub(crate) fn stopwatch() -> impl FnMut() -> f64 {
     }
 }
 
-/// Which twin runs a frame's stages.
-pub enum Twin<'a> {
-    Cpu,
-    Gpu(&'a mut gpu::Gpu),
-}
-
 /// Extracts a frame's polygons on the CPU twin, keeping every stage's image.
 pub fn extract_cpu(
     frame: &DepthFrame,
     intr: &Intrinsics,
     cfg: &PipelineConfig,
 ) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
-    extract_with(Twin::Cpu, frame, intr, cfg, true)
+    extract_with(None, frame, intr, cfg, true)
 }
 
 /// Extracts a frame's polygons with the per-pixel stages and the RANSAC scoring on the
@@ -244,14 +239,14 @@ pub fn extract_gpu(
     cfg: &PipelineConfig,
     keep_images: bool,
 ) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
-    extract_with(Twin::Gpu(gpu), frame, intr, cfg, keep_images)
+    extract_with(Some(gpu), frame, intr, cfg, keep_images)
 }
 
-/// One frame, every stage, on either twin: the per-pixel stages up to the region labels
-/// (one submit on the GPU), then the plane fits (RANSAC scored by the twin), the region
-/// clean-up, outlines and polygons.
+/// One frame, every stage, on the GPU twin where `gpu` is given, else the CPU twin: the
+/// per-pixel stages up to the region labels (one submit on the GPU), then the plane fits
+/// (RANSAC scored by the twin), the region clean-up, outlines and polygons.
 pub fn extract_with(
-    twin: Twin,
+    gpu: Option<&mut gpu::Gpu>,
     frame: &DepthFrame,
     intr: &Intrinsics,
     cfg: &PipelineConfig,
@@ -260,15 +255,15 @@ pub fn extract_with(
     let mut times = StageTimes::default();
     let t0 = Instant::now();
     let mut lap = stopwatch();
-    let (images, seg, depth, mut gpu) = match twin {
-        Twin::Cpu => {
+    let (images, seg, depth, mut gpu) = match gpu {
+        None => {
             let depth = depth_metres(frame, intr)?;
             times.upload = lap();
             let images = cpu::image_stages(&depth, intr, cfg, &mut times, &mut lap);
             let seg = Segmentation::components(&images.boundary, MIN_REGION_PIXELS);
             (Some(images), seg, depth, None)
         }
-        Twin::Gpu(gpu) => {
+        Some(gpu) => {
             // Checked before anything is uploaded; the GPU converts the raw frame to metres,
             // and the CPU its own copy while the GPU works.
             check_frame(frame, intr)?;
