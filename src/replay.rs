@@ -11,14 +11,6 @@ use crate::extract::Extractor;
 use crate::map::{MapUpdate, PolygonMap, persist};
 use crate::sequence::Sequence;
 
-/// Saves the map where the config says, if it says.
-fn save_snapshot(map: &mut PolygonMap, config: &Config) -> Result<()> {
-    match persist::snapshot_path(&config.map) {
-        Some(path) => persist::save_to(&map.snapshot(), path),
-        None => Ok(()),
-    }
-}
-
 /// Maps every frame of `seq` into `map`; `on_frame(k, update)` sees each frame's changes.
 pub fn replay(
     seq: &Sequence,
@@ -35,11 +27,11 @@ pub fn replay(
         let update = map.update(&frame.polygons, &seq.poses[k].transform, &seq.intrinsics, Some(&stages.depth));
         on_frame(k, &update);
         if last_save.elapsed() >= period {
-            save_snapshot(map, config)?;
+            persist::save_configured(map, &config.map)?;
             last_save = Instant::now();
         }
     }
-    save_snapshot(map, config)
+    persist::save_configured(map, &config.map)
 }
 
 /// Writes the map's JSON to `path`.

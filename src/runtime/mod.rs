@@ -230,9 +230,10 @@ async fn run_with(
 
 /// The map snapshotted under its lock, written (slow on a full or failing disk) off it.
 async fn save_snapshot(map: &Arc<Mutex<PolygonMap>>, config: &Config) -> Result<()> {
-    let Some(path) = crate::map::persist::snapshot_path(&config.map).map(|p| p.to_path_buf()) else {
+    if crate::map::persist::snapshot_path(&config.map).is_none() {
         return Ok(());
-    };
+    }
     let snapshot = map.lock().snapshot();
-    tokio::task::spawn_blocking(move || crate::map::persist::save_to(&snapshot, &path)).await?
+    let cfg = config.map.clone();
+    tokio::task::spawn_blocking(move || crate::map::persist::save_snapshot_to_config(&snapshot, &cfg)).await?
 }
