@@ -1,0 +1,95 @@
+//! The map's public types: its polygons as planners get them, a snapshot, what a frame
+//! changed, and the running totals.
+
+use super::*;
+
+/// One map polygon as planners get it (world frame, metres).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MapPolygon {
+    pub id: u64,
+    pub label: Label,
+    /// Unit normal; up for horizontal polygons.
+    pub normal: [f64; 3],
+    /// Plane offset: normal . p + offset = 0.
+    pub offset: f64,
+    /// m^2, holes excluded.
+    pub area: f64,
+    pub centroid: [f64; 3],
+    pub boundary: Vec<[f64; 3]>,
+    pub holes: Vec<Vec<[f64; 3]>>,
+    /// Convex pieces whose union is the insets: where a foot fits whole.
+    pub convex_pieces: Vec<Vec<[f64; 3]>>,
+    /// The polygon shrunk by the foot margin: every piece that is left, each with its holes
+    /// (grown by the margin); empty when nothing is left.
+    #[serde(default)]
+    pub insets: Vec<Region>,
+    /// Frames that saw it.
+    pub observations: u32,
+    /// Step index for treads, landings and risers; 0 for the floor.
+    pub step: Option<u32>,
+    /// Covariance of the plane's coefficients (normal x, y, z, offset), row-major: the
+    /// observations' plane covariances fused (extract::uncertainty). All zero when unknown
+    /// (no observation said; a snapshot keeps it).
+    #[serde(default = "unknown_covariance")]
+    pub plane_covariance: [f64; 16],
+}
+
+pub(super) fn unknown_covariance() -> [f64; 16] {
+    [0.0; 16]
+}
+
+impl MapPolygon {
+    /// The height of its plane over (x, y), seen from above (not for vertical polygons).
+    pub fn height_at(&self, x: f64, y: f64) -> f64 {
+        -(self.normal[0] * x + self.normal[1] * y + self.offset) / self.normal[2]
+    }
+}
+
+/// A polygon with holes on a map polygon's plane (world frame, metres): outline
+/// counter-clockwise seen from above the plane, holes clockwise, no closing repeat.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Region {
+    pub boundary: Vec<[f64; 3]>,
+    pub holes: Vec<Vec<[f64; 3]>>,
+}
+
+/// The whole map as saved and published.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MapSnapshot {
+    /// The map's version: one more with every frame merged (see [`PolygonMap::version`]).
+    #[serde(default)]
+    pub version: u64,
+    /// Always "world".
+    pub frame: String,
+    /// Estimated vertical drift of the odometry, m.
+    pub drift_z: f64,
+    /// Its variance, m^2.
+    pub drift_var: f64,
+    #[serde(default)]
+    pub stair: Option<Stair>,
+    pub polygons: Vec<MapPolygon>,
+}
+
+/// What one frame changed.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MapUpdate {
+    pub added: Vec<u64>,
+    pub changed: Vec<u64>,
+    pub removed: Vec<u64>,
+    /// The drift this frame measured (before filtering), m.
+    pub drift_measured: Option<f64>,
+    /// What was refused, each with why.
+    pub rejected: Vec<Rejection>,
+}
+
+/// Running totals, for status and logs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct MapCounters {
+    pub frames: u64,
+    pub polygons_in: u64,
+    pub rejected: u64,
+    pub merged: u64,
+    pub added: u64,
+    pub removed: u64,
+    pub cleared: u64,
+}
