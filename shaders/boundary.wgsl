@@ -1,11 +1,11 @@
-// Where a pixel cannot be inside a planar region: the GPU side of cpu::canny::boundary
+// Where a pixel cannot be inside a planar region: the GPU side of cpu::boundary::boundary
 // (the oracle `boundary_oracle` mirrors it). `lines` marks Canny edges and depth steps;
 // shaders/morphology.wgsl closes them; `holes` adds the pixels without a normal;
 // morphology.wgsl seals those with the small square; `seal` grows each closed line
 // pixel into its 4-neighbours (regions are 8-connected, a thin diagonal line would leak)
 // and adds the sealed pixels.
 
-// Field by field the Rust struct gpu::BoundaryParams.
+// Field by field the Rust struct params::BoundaryParams.
 struct BoundaryParams { width: u32, height: u32, depth_edge_ratio: f32, pad: u32 }
 
 @group(0) @binding(0) var<uniform> p: BoundaryParams;

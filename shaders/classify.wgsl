@@ -1,9 +1,9 @@
 // Canny on the normal image, second pass: non-maximum suppression along the gradient's
 // sector and the double threshold (0 none, 1 weak, 2 strong), from shaders/gradient.wgsl's
-// magnitude and sector. The GPU side of src/extract/cpu/canny.rs (suppressed_class).
+// magnitude and sector. The GPU side of src/extract/cpu/classify.rs (suppressed_class).
 // Hysteresis follows in shaders/hysteresis.wgsl.
 
-// Field by field the Rust struct gpu::CannyParams (shared with gradient.wgsl).
+// Field by field the Rust struct params::CannyParams (shared with gradient.wgsl).
 struct CannyParams { width: u32, height: u32, low: f32, high: f32 }
 
 @group(0) @binding(0) var<uniform> p: CannyParams;

@@ -8,7 +8,7 @@
 // as its first pixel in scan order; flattening then labels each pixel root + 1. The
 // label is the same whatever order the unions run in.
 
-// Field by field the Rust struct gpu::ComponentsParams.
+// Field by field the Rust struct params::ComponentsParams.
 struct ComponentsParams { width: u32, height: u32, inside_nonzero: u32, pad: u32 }
 
 @group(0) @binding(0) var<uniform> p: ComponentsParams;

@@ -8,7 +8,7 @@
 // invocation at a time), and write the line back. A step is a row pass then a column
 // pass. Invalid pixels neither give nor receive.
 
-// Field by field the Rust struct gpu::DiffusionParams.
+// Field by field the Rust struct params::DiffusionParams.
 struct DiffusionParams {
     len: u32,          // pixels along a line
     lines: u32,

@@ -1,9 +1,9 @@
 // Canny on the normal image, first pass: the gradient of the unit-normal field, its
 // magnitude (change of normal per pixel) and non-maximum-suppression sector (4 = a tap
-// without a normal). The GPU side of src/extract/cpu/canny.rs (normal_gradient,
+// without a normal). The GPU side of src/extract/cpu/gradient.rs (normal_gradient,
 // gradient_sector); shaders/classify.wgsl reads what it writes.
 
-// Field by field the Rust struct gpu::CannyParams (shared with classify.wgsl).
+// Field by field the Rust struct params::CannyParams (shared with classify.wgsl).
 struct CannyParams { width: u32, height: u32, low: f32, high: f32 }
 
 @group(0) @binding(0) var<uniform> p: CannyParams;

@@ -1,9 +1,9 @@
-// Canny's hysteresis: the GPU side of cpu::canny::hysteresis. shaders/components.wgsl
+// Canny's hysteresis: the GPU side of cpu::hysteresis::hysteresis. shaders/components.wgsl
 // first labels the 8-connected components of the weak-or-strong pixels (classify.wgsl's
 // 1 and 2); then `mark_strong` flags each component holding a strong pixel, at its
 // root, and `keep` makes an edge of every pixel of a flagged component.
 
-// Field by field the Rust struct gpu::CannyParams (shared with gradient.wgsl and classify.wgsl).
+// Field by field the Rust struct params::CannyParams (shared with gradient.wgsl and classify.wgsl).
 struct CannyParams { width: u32, height: u32, low: f32, high: f32 }
 
 @group(0) @binding(0) var<uniform> p: CannyParams;

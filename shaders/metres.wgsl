@@ -3,7 +3,7 @@
 // half the bytes of metres. f32(d) * scale is one correctly rounded product, as on the
 // CPU, so both twins start from the same bits.
 
-// Field by field the Rust struct gpu::MetresParams.
+// Field by field the Rust struct params::MetresParams.
 struct MetresParams { width: u32, height: u32, scale: f32, pad: u32 }
 
 @group(0) @binding(0) var<uniform> p: MetresParams;

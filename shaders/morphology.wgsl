@@ -2,7 +2,7 @@
 // cpu::morphology (the oracle `morphology_at` mirrors it). A square is a row pass then
 // a column pass; a closing is a dilation then an erosion, four passes.
 
-// Field by field the Rust struct gpu::MorphologyParams.
+// Field by field the Rust struct params::MorphologyParams.
 struct MorphologyParams {
     width: u32, height: u32, radius: u32,
     // 0: along rows (u), 1: along columns (v).

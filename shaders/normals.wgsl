@@ -3,7 +3,7 @@
 // cross product of the back-projected surface's tangents, facing the camera. A pixel
 // with any invalid tap, or within the kernel radius of the border, gets (0, 0, 0).
 
-// Field by field the Rust struct gpu::NormalsParams.
+// Field by field the Rust struct params::NormalsParams.
 struct NormalsParams {
     width: u32, height: u32, radius: u32, norm: f32,
     fx: f32, fy: f32, cx: f32, cy: f32,

@@ -5,7 +5,7 @@
 // hypothesis k % hypotheses of region k / hypotheses: its 64 invocations count the
 // region's scoring points within the inlier distance of the plane together.
 
-// Field by field the Rust struct gpu::RansacParams.
+// Field by field the Rust struct params::RansacParams.
 struct RansacParams { hypotheses: u32, regions: u32, inlier_distance: f32, points: u32 }
 
 @group(0) @binding(0) var<uniform> p: RansacParams;

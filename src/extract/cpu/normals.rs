@@ -1,4 +1,4 @@
-//! Surface normals from smoothed depth: the CPU twin of the GPU stage shaders/normals.wgsl (the WGSL half lands with the GPU backend).
+//! Surface normals from smoothed depth: the CPU twin of shaders/normals.wgsl.
 //!
 //! Sobel derivatives Z_u, Z_v (normalised to depth change per pixel) give the exact
 //! tangents of the back-projected surface P(u, v) = Z(u, v) * ray(u, v):
