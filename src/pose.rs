@@ -381,3 +381,21 @@ fn check(raw: &RawPose, last_ns: Option<StampNs>, limits: &PoseLimits, now_ns: S
     let rotation = UnitQuaternion::from_quaternion(Quaternion::new(q[3], q[0], q[1], q[2]));
     Ok(Pose { stamp_ns, transform: Isometry3::from_parts(Translation3::from(Vector3::from(position)), rotation) })
 }
+
+/// T_world_camera of a frame: the body's pose and the camera's mount, the rotation made
+/// unit again (a recording writes it, and it must read back as it was used).
+pub fn world_camera(world_body: &Isometry3<f64>, body_camera: &Isometry3<f64>) -> Isometry3<f64> {
+    let mut t = world_body * body_camera;
+    t.rotation.renormalize();
+    t
+}
+
+/// T_body_camera from the config.
+pub fn extrinsic(config: &crate::config::Config) -> Isometry3<f64> {
+    let e = &config.sources.extrinsics;
+    let [x, y, z, w] = e.quat_xyzw;
+    Isometry3::from_parts(
+        Translation3::from(Vector3::from(e.xyz)),
+        UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
+    )
+}

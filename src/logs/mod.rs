@@ -321,7 +321,7 @@ pub fn replay(
     let images = scan.count(&topics.depth);
     drop(scan);
 
-    let body_camera: Isometry3<f64> = crate::runtime::worker::extrinsic(config);
+    let body_camera: Isometry3<f64> = crate::pose::extrinsic(config);
     let unit_m = Some(config.sources.depth.image_unit_m).filter(|&u| u > 0.0);
     let mut extractor = Extractor::new(&config.pipeline)?;
     let mut info: Option<CameraInfo> = None;
@@ -348,7 +348,7 @@ pub fn replay(
                     let (polygons, stages, _) = extractor
                         .extract(&frame, &intrinsics)
                         .with_context(|| format!("{path}: the image stamped {} ns", frame.stamp_ns))?;
-                    let t_world_camera = crate::runtime::worker::world_camera(&world_body, &body_camera);
+                    let t_world_camera = crate::pose::world_camera(&world_body, &body_camera);
                     map.update(&polygons.polygons, &t_world_camera, &intrinsics, Some(&stages.depth));
                     out.mapped += 1;
                 }

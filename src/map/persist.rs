@@ -38,17 +38,10 @@ pub fn save_to(snapshot: &MapSnapshot, path: &Path) -> anyhow::Result<()> {
     save(snapshot, path).with_context(|| format!("saving the map to {}", path.display()))
 }
 
-/// Saves `map` where the config says (`map.snapshot_path`), if it says: offline replays
-/// and the live mapper alike. The live mapper takes the snapshot under its lock and
-/// writes it off the lock ([`save_snapshot_to_config`]).
+/// Saves `map` where the config says (`map.snapshot_path`), if it says.
 pub fn save_configured(map: &mut PolygonMap, cfg: &MapConfig) -> anyhow::Result<()> {
-    save_snapshot_to_config(&map.snapshot(), cfg)
-}
-
-/// [`save_configured`] of a snapshot already taken.
-pub fn save_snapshot_to_config(snapshot: &MapSnapshot, cfg: &MapConfig) -> anyhow::Result<()> {
     match snapshot_path(cfg) {
-        Some(path) => save_to(snapshot, path),
+        Some(path) => save_to(&map.snapshot(), path),
         None => Ok(()),
     }
 }

@@ -230,10 +230,9 @@ async fn run_with(
 
 /// The map snapshotted under its lock, written (slow on a full or failing disk) off it.
 async fn save_snapshot(map: &Arc<Mutex<PolygonMap>>, config: &Config) -> Result<()> {
-    if crate::map::persist::snapshot_path(&config.map).is_none() {
+    let Some(path) = crate::map::persist::snapshot_path(&config.map).map(|p| p.to_path_buf()) else {
         return Ok(());
-    }
+    };
     let snapshot = map.lock().snapshot();
-    let cfg = config.map.clone();
-    tokio::task::spawn_blocking(move || crate::map::persist::save_snapshot_to_config(&snapshot, &cfg)).await?
+    tokio::task::spawn_blocking(move || crate::map::persist::save_to(&snapshot, &path)).await?
 }

@@ -169,7 +169,7 @@ pub async fn start_d435i(
         D435iKind::Mock => {
             let seq =
                 seq.ok_or_else(|| anyhow!("sources.d435i.kind = \"mock\" needs the mock depth camera's sequence"))?;
-            let extrinsic = super::worker::extrinsic(config);
+            let extrinsic = crate::pose::extrinsic(config);
             let mock = MockD435i::from_sequence(seq, &extrinsic, &cfg).map_err(|e| anyhow!("mock D435i: {e}"))?;
             let clock = crate::mock::SequenceClock::new(seq)?;
             let run_cfg = cfg.clone();

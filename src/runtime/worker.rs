@@ -15,7 +15,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::{Result, anyhow};
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use nalgebra::Isometry3;
 use parking_lot::Mutex;
 
 use super::awaiting::{AwaitingPose, Settled, Skip};
@@ -228,7 +228,7 @@ impl FrameMapper {
     ) -> FrameMapper {
         let max_wait_ns = (config.poses.max_wait_s * 1e9) as u64;
         FrameMapper {
-            body_camera: extrinsic(config),
+            body_camera: crate::pose::extrinsic(config),
             awaiting: AwaitingPose::new(MAX_AWAITING, max_wait_ns),
             poses,
             map,
@@ -261,7 +261,7 @@ impl FrameMapper {
             }
             match s {
                 Settled::Posed(mut frame, world_body) => {
-                    let t_world_camera = world_camera(&world_body, &self.body_camera);
+                    let t_world_camera = crate::pose::world_camera(&world_body, &self.body_camera);
                     let mut map = self.map.lock();
                     let updated = std::panic::catch_unwind(AssertUnwindSafe(|| {
                         update_map(&mut map, &frame, &world_body, &t_world_camera)
@@ -322,22 +322,4 @@ fn panicked(during: &'static str, panic: Box<dyn std::any::Any + Send>, map_inta
         .unwrap_or_else(|| "(no message)".into());
     tracing::error!("the extractor thread panicked {during}: {message}");
     WorkerEnd::Panicked { during, message, map_intact }
-}
-
-/// T_world_camera of a frame: the body's pose and the camera's mount, the rotation made
-/// unit again (a recording writes it, and it must read back as it was used).
-pub fn world_camera(world_body: &Isometry3<f64>, body_camera: &Isometry3<f64>) -> Isometry3<f64> {
-    let mut t = world_body * body_camera;
-    t.rotation.renormalize();
-    t
-}
-
-/// T_body_camera from the config.
-pub fn extrinsic(config: &Config) -> Isometry3<f64> {
-    let e = &config.sources.extrinsics;
-    let [x, y, z, w] = e.quat_xyzw;
-    Isometry3::from_parts(
-        Translation3::from(Vector3::from(e.xyz)),
-        UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
-    )
 }
