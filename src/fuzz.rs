@@ -129,7 +129,7 @@ fn small_map() -> MapSnapshot {
     };
     MapSnapshot {
         version: 0,
-        frame: "world".into(),
+        frame: crate::map::MapFrame::World,
         drift_z: 0.0,
         drift_var: 0.0,
         stair: None,

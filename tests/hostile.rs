@@ -159,7 +159,7 @@ async fn implausible_poses_on_the_wire_are_refused_and_the_real_odometry_keeps_m
 fn snapshot_with(boundary: Vec<[f64; 3]>) -> MapSnapshot {
     MapSnapshot {
         version: 0,
-        frame: "world".into(),
+        frame: polymap::map::MapFrame::World,
         drift_z: 0.0,
         drift_var: 0.0,
         stair: None,

@@ -9,7 +9,7 @@ use polymap::extract::{Grid, Polygon, VertexKind};
 use polymap::map::convex::convex_pieces;
 use polymap::map::drift::DriftFilter;
 use polymap::map::geometry::top_down;
-use polymap::map::{Label, MapSnapshot, PolygonMap, PolygonProblem, Rejection, SnapshotProblem, persist};
+use polymap::map::{Label, MapFrame, MapSnapshot, PolygonMap, PolygonProblem, Rejection, SnapshotProblem, persist};
 use polymap::types::Intrinsics;
 use proptest::prelude::*;
 
@@ -167,8 +167,14 @@ fn the_foothold_answer_lies_inside_the_inset() {
     let hole = rect(0.4, 0.2, 0.6, 0.4);
     let p = mapped(&rect(0.0, 0.0, 1.0, 0.6), std::slice::from_ref(&hole), 0.15);
     let inset = geo::MultiPolygon(p.insets.iter().map(|r| top_down(&r.boundary, &r.holes)).collect());
-    let snap =
-        MapSnapshot { version: 1, frame: "world".into(), drift_z: 0.0, drift_var: 0.0, stair: None, polygons: vec![p] };
+    let snap = MapSnapshot {
+        version: 1,
+        frame: MapFrame::World,
+        drift_z: 0.0,
+        drift_var: 0.0,
+        stair: None,
+        polygons: vec![p],
+    };
     // Beside the hole, in the hole, near the outline (inside the polygon but not the inset),
     // and off the polygon.
     for (q, inside) in [([0.2, 0.3], true), ([0.5, 0.3], false), ([0.98, 0.3], false), ([1.3, 0.3], false)] {

@@ -1,7 +1,7 @@
 //! Conversions between polymap's own types and its ROS messages, both ways, in one place.
 
 use crate::camera::ImuSample;
-use crate::map::{Label, MapPolygon, MapSnapshot, Region};
+use crate::map::{Label, MapFrame, MapPolygon, MapSnapshot, Region};
 use crate::pose::RawPose;
 use crate::ros2::msg::{
     self, ColorRgba, Duration, FramePolygons, Header, Image, Imu, Map, MapUpdate, Marker, MarkerArray, Odometry, Point,
@@ -158,7 +158,7 @@ pub fn map(s: &MapSnapshot, stamp_ns: StampNs, epoch: u64, frame_id: &str) -> Ma
 pub fn snapshot_of(m: &Map) -> MapSnapshot {
     MapSnapshot {
         version: m.version,
-        frame: m.header.frame_id.clone(),
+        frame: MapFrame::World,
         drift_z: m.drift_z,
         drift_var: m.drift_var,
         stair: None,

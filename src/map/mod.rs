@@ -49,7 +49,7 @@ use geometry::{Moments, Plane, PlaneFrame, ViewPyramid};
 pub use labels::{Label, Stair};
 use observe::*;
 use types::unknown_covariance;
-pub use types::{MapCounters, MapPolygon, MapSnapshot, MapUpdate, Region};
+pub use types::{MapCounters, MapFrame, MapPolygon, MapSnapshot, MapUpdate, Region};
 pub use validate::{PolygonProblem, Rejection, SnapshotProblem, polygon_problem};
 
 /// A map polygon's state: its shape on its plane frame and what it has seen.

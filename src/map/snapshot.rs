@@ -8,7 +8,7 @@ impl PolygonMap {
         let polygons = self.ids().into_iter().filter_map(|id| self.polygon(id)).collect();
         MapSnapshot {
             version: self.version,
-            frame: "world".into(),
+            frame: MapFrame::World,
             drift_z: self.drift.z,
             drift_var: self.drift.var,
             stair: self.stair.clone(),
@@ -19,9 +19,6 @@ impl PolygonMap {
     /// A map rebuilt from a snapshot: each polygon's moments are its surface's, weighted by
     /// its observations, so later frames refine it as if it had been seen all along.
     pub fn from_snapshot(cfg: &MapConfig, s: &MapSnapshot) -> Result<PolygonMap, SnapshotProblem> {
-        if s.frame != "world" {
-            return Err(SnapshotProblem::Frame(s.frame.clone()));
-        }
         if !(s.drift_z.is_finite() && s.drift_var.is_finite() && s.drift_var >= 0.0) {
             return Err(SnapshotProblem::Drift { z: s.drift_z, var: s.drift_var });
         }

@@ -53,14 +53,22 @@ pub struct Region {
     pub holes: Vec<Vec<[f64; 3]>>,
 }
 
+/// The frame a snapshot's coordinates are in: the map's own, the odometry's world with
+/// the drift taken out; written "world" (a snapshot in any other is refused as it is read).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MapFrame {
+    #[default]
+    World,
+}
+
 /// The whole map as saved and published.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MapSnapshot {
     /// The map's version: one more with every frame merged (see [`PolygonMap::version`]).
     #[serde(default)]
     pub version: u64,
-    /// Always "world".
-    pub frame: String,
+    pub frame: MapFrame,
     /// Estimated vertical drift of the odometry, m.
     pub drift_z: f64,
     /// Its variance, m^2.

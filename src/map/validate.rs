@@ -44,8 +44,6 @@ pub enum PolygonProblem {
 /// Why a snapshot cannot be rebuilt into a map.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum SnapshotProblem {
-    #[error("frame is {0:?}, a map is in \"world\"")]
-    Frame(String),
     #[error("drift_z {z} / drift_var {var} must be finite, the variance >= 0")]
     Drift { z: f64, var: f64 },
     #[error("polygon id {0} appears twice")]
