@@ -162,7 +162,7 @@ async fn mock_vins_and_mapper_over_zenoh_build_the_true_map() {
     let key = node.data_key(&polymap::ros2::graph::Endpoint {
         name: &interface.get_foothold.name,
         type_name: "polymap_msgs/srv/GetFoothold",
-        type_hash: &polymap::ros2::types::service_hash::<polymap::ros2::msg::GetFoothold>(),
+        type_hash: &polymap::ros2::msg::service_hash::<polymap::ros2::msg::GetFoothold>(),
     });
     let replies = session.get(key).payload(vec![0u8, 1, 0, 0, 1]).await.unwrap();
     let reply = replies.recv_async().await.expect("an answer");

@@ -4,7 +4,7 @@
 //! counted and kept out; PoseStamped is understood when configured; the mock VINS, a
 //! separate process, publishes a sequence's poses.
 
-use polymap::runtime::wires::{Held, Wires};
+use polymap::interface::wires::{Held, Wires};
 use std::sync::Arc;
 use std::time::Duration;
 

@@ -7,9 +7,10 @@ use polymap::interface::convert;
 use polymap::pose::RawPose;
 use polymap::ros2::attachment::{Attachment, gid_of};
 use polymap::ros2::graph::{self, Endpoint, EntityKind, NodeId};
+use polymap::ros2::msg::service_hash;
 use polymap::ros2::msg::{self, MapUpdate, Odometry, Polygon, Status};
 use polymap::ros2::qos::{Durability, History, Qos, Reliability};
-use polymap::ros2::types::{RosService, dds_type_name, message_hash, service_hash};
+use polymap::ros2::types::{RosService, dds_type_name, message_hash};
 use polymap::ros2::{Distro, Mode, RosName, cdr};
 
 #[test]

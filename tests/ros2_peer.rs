@@ -99,7 +99,8 @@ fn a_ros_2_peer_on_rmw_zenoh_sees_polymap_s_topics_graph_and_services_and_feeds_
     // The peer's hashes (rosbags from polymap_msgs/ and ROS 2 Jazzy's definitions) are the
     // ones polymap computes from its own types.
     use polymap::ros2::msg;
-    use polymap::ros2::types::{message_hash, service_hash};
+    use polymap::ros2::msg::service_hash;
+    use polymap::ros2::types::message_hash;
     let hashes = &v["hashes"];
     for (ty, ours) in [
         ("polymap_msgs/msg/FramePolygons", message_hash::<msg::FramePolygons>()),

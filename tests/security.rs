@@ -20,7 +20,7 @@ use polymap::interface::{Interface, OdometryTopic, convert};
 use polymap::pose::RawPose;
 use polymap::ros2::graph::Endpoint;
 use polymap::ros2::msg::{Foothold, GetFoothold, GetFootholdRequest, GetFootholdResponse, Point};
-use polymap::ros2::{Node, NodeOptions, RosName, cdr, types};
+use polymap::ros2::{Node, NodeOptions, RosName, cdr};
 use rcgen::{
     BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, KeyPair, KeyUsagePurpose, SanType,
 };
@@ -179,7 +179,7 @@ async fn only_authenticated_authorised_peers_reach_polymap() {
 
     // The intruder: odometry of its own, and a queryable on the foothold service.
     let phantom = intruder.publisher(&odometry).await.unwrap();
-    let hash = types::service_hash::<GetFoothold>();
+    let hash = polymap::ros2::msg::service_hash::<GetFoothold>();
     let key = intruder.data_key(&Endpoint {
         name: &interface.get_foothold.name,
         type_name: "polymap_msgs/srv/GetFoothold",

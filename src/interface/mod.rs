@@ -6,6 +6,7 @@
 pub mod convert;
 pub mod follower;
 pub mod terrain;
+pub mod wires;
 
 use crate::config::{Config, OdometryType};
 use crate::ros2::msg::{

@@ -19,10 +19,10 @@ use nalgebra::Isometry3;
 use super::SequenceClock;
 use crate::clock::now_ns;
 use crate::config::Config;
+use crate::interface::wires::Wires;
 use crate::interface::{OdometryTopic, convert};
 use crate::pose::{PoseBuffer, RawPose};
 use crate::ros2::{Node, NodeOptions, RosName};
-use crate::runtime::wires::Wires;
 use crate::sequence::Sequence;
 use crate::types::StampNs;
 

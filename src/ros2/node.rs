@@ -24,6 +24,7 @@ use zenoh_ext::{
 use super::attachment::{Attachment, Gid, gid_of};
 use super::cdr::{self, CdrError};
 use super::graph::{self, Endpoint, EntityKind, NodeId};
+use super::msg;
 use super::qos::{Durability, History, Qos, Reliability};
 use super::types::{self, RosMessage, RosService};
 use super::{Encoding, Mode, Ros2Error, RosName, Service, Topic};
@@ -201,7 +202,7 @@ impl Node {
         service: &Service<S>,
         handler: impl Fn(Result<S::Request, CdrError>) -> Result<S::Response, String> + Send + Sync + 'static,
     ) -> Result<ServiceServer, Ros2Error> {
-        let hash = types::service_hash::<S>();
+        let hash = msg::service_hash::<S>();
         let e = Endpoint { name: &service.name, type_name: S::TYPE_NAME, type_hash: &hash };
         let declared = self.declare(EntityKind::ServiceServer, &e, SERVICE_QOS).await?;
         let attaches = self.attaches();
@@ -240,7 +241,7 @@ impl Node {
     }
 
     pub async fn client<S: RosService>(&self, service: &Service<S>) -> Result<Client<S>, Ros2Error> {
-        let hash = types::service_hash::<S>();
+        let hash = msg::service_hash::<S>();
         let e = Endpoint { name: &service.name, type_name: S::TYPE_NAME, type_hash: &hash };
         let declared = self.declare(EntityKind::ServiceClient, &e, SERVICE_QOS).await?;
         Ok(Client {

@@ -118,54 +118,10 @@ pub fn message_hash<T: RosMessage>() -> String {
     hash_of(&Nested { name: T::TYPE_NAME, fields: T::fields })
 }
 
-/// The RIHS01 hash of a service type: of its description with the request, the response and
-/// the event message rosidl generates for every service.
-pub fn service_hash<S: RosService>() -> String {
-    hash_of(&service_description::<S>())
-}
-
-fn service_description<S: RosService>() -> Nested {
-    fn parts<S: RosService>() -> Vec<Field> {
-        let nested =
-            |n: Nested| FieldType { type_id: type_id::NESTED, capacity: 0, string_capacity: 0, nested: Some(n) };
-        vec![
-            Field {
-                name: "request_message",
-                ty: nested(Nested { name: S::Request::TYPE_NAME, fields: S::Request::fields }),
-            },
-            Field {
-                name: "response_message",
-                ty: nested(Nested { name: S::Response::TYPE_NAME, fields: S::Response::fields }),
-            },
-            Field { name: "event_message", ty: nested(Nested { name: S::EVENT_TYPE_NAME, fields: event_fields::<S> }) },
-        ]
-    }
-    fn event_fields<S: RosService>() -> Vec<Field> {
-        let at_most_one = |n: Nested| FieldType {
-            type_id: type_id::NESTED + type_id::BOUNDED_SEQUENCE,
-            capacity: 1,
-            string_capacity: 0,
-            nested: Some(n),
-        };
-        vec![
-            Field { name: "info", ty: crate::ros2::msg::ServiceEventInfo::field_type() },
-            Field {
-                name: "request",
-                ty: at_most_one(Nested { name: S::Request::TYPE_NAME, fields: S::Request::fields }),
-            },
-            Field {
-                name: "response",
-                ty: at_most_one(Nested { name: S::Response::TYPE_NAME, fields: S::Response::fields }),
-            },
-        ]
-    }
-    Nested { name: S::TYPE_NAME, fields: parts::<S> }
-}
-
 /// REP 2016: SHA-256 of the type's description and every type it refers to (sorted by name,
 /// once each), as JSON written the way Python's `json.dumps(..., separators=(", ", ": "))`
 /// writes it, without default values.
-fn hash_of(top: &Nested) -> String {
+pub(crate) fn hash_of(top: &Nested) -> String {
     let mut referenced = std::collections::BTreeMap::new();
     let mut todo: Vec<Nested> = nested_of(&(top.fields)());
     while let Some(n) = todo.pop() {

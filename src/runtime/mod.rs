@@ -30,7 +30,6 @@ pub mod services;
 pub mod slot;
 pub mod sources;
 pub mod status;
-pub mod wires;
 pub mod worker;
 
 use std::sync::Arc;
@@ -42,6 +41,7 @@ use parking_lot::Mutex;
 
 use crate::clock::now_ns;
 use crate::config::Config;
+use crate::interface::wires::Wires;
 use crate::map::PolygonMap;
 use crate::pose::PoseBuffer;
 use crate::ros2::Node;
@@ -87,10 +87,10 @@ async fn run_with(
     let session = crate::ros2::session::open(crate::ros2::session::config(&config.zenoh.config_file)?).await?;
     let node = Arc::new(Node::new(&session, config.ros2.node_options()).await?);
     let ros1 = match config.ros1.enabled {
-        true => Some(wires::Wires::ros1(config, &config.ros1.node_name()).await?),
+        true => Some(Wires::ros1(config, &config.ros1.node_name()).await?),
         false => None,
     };
-    let wires = wires::Wires { ros2: Some(wires::Wires::ros2(config, node)), ros1 };
+    let wires = Wires { ros2: Some(Wires::ros2(config, node)), ros1 };
     let poses =
         Arc::new(Mutex::new(PoseBuffer::with_limits(4096, crate::pose::PoseLimits::from_config(&config.poses))));
     let _odometry = odometry::subscribe(&wires, poses.clone()).await?;

@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use parking_lot::Mutex;
 
-use super::wires::{Held, WireError, Wires};
+use crate::interface::wires::{Held, WireError, Wires};
 use crate::interface::{OdometryTopic, convert};
 use crate::pose::{PoseBuffer, RawPose};
 use crate::ros2::cdr::CdrError;

@@ -8,9 +8,9 @@
 use parking_lot::Mutex;
 
 use super::status::Report;
-use super::wires::{Out, WireError, Wires};
 use super::worker::FrameEvent;
 use crate::config::{Config, PlanarTerrainConfig};
+use crate::interface::wires::{Out, WireError, Wires};
 use crate::interface::{convert, terrain};
 use crate::map::PolygonMap;
 use crate::map::elevation::GridSpec;

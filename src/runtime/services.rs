@@ -7,9 +7,9 @@ use std::sync::atomic::Ordering;
 use parking_lot::Mutex;
 
 use super::status::Counters;
-use super::wires::{Held, WireError, Wires};
 use crate::clock::now_ns;
 use crate::interface::convert;
+use crate::interface::wires::{Held, WireError, Wires};
 use crate::map::PolygonMap;
 use crate::ros2::msg::{GetFootholdResponse, GetMapResponse};
 

@@ -9,10 +9,10 @@ use anyhow::{Result, anyhow, bail};
 
 use super::slot::Slot;
 use super::status::Counters;
-use super::wires::{Out, Wires};
 use crate::camera::D435iSample;
 use crate::config::{Config, D435iKind, DepthSourceKind};
 use crate::interface::convert;
+use crate::interface::wires::{Out, Wires};
 use crate::ros2::msg::{CameraInfo, Image, Imu};
 use crate::sequence::Sequence;
 

@@ -5,8 +5,8 @@
 
 use std::sync::Arc;
 
+use super::Interface;
 use crate::config::Config;
-use crate::interface::Interface;
 use crate::ros1::{self, Ros1Error, Ros1Message, Ros1Service};
 use crate::ros2::cdr::CdrError;
 use crate::ros2::types::{RosMessage, RosService};
