@@ -25,8 +25,7 @@ pub fn par_rows<T: bytemuck::Pod + Send + Sync>(
     let mut data: Vec<T> = Vec::with_capacity(n);
     // An init of one repeated byte (zero in every image, a byte mask's 1) is set by
     // memset, the C library's widest stores; `fill` is a loop of 16-byte stores here (this
-    // generic code is compiled for the baseline CPU): 10.8 % of a 640x480 frame's
-    // samples, now 5.6 %.
+    // generic code is compiled for the baseline CPU).
     // (A zero-sized init has no byte to repeat: it takes the fill.)
     let bytes = bytemuck::bytes_of(&init);
     let one_byte = bytes.first().copied().filter(|&b| bytes.iter().all(|&x| x == b));

@@ -41,8 +41,8 @@ pub use types::{DepthFrame, Intrinsics, Pose};
 
 /// Tells glibc's malloc to keep freed memory mapped. By default it gives blocks over
 /// 128 KiB back to the kernel on free, and every frame's images are such blocks: the
-/// next frame then page-faults them in again, about 6,500 faults a 640x480 frame,
-/// which cost a third of the CPU twin's time. Call once at start-up.
+/// next frame then page-faults them in again, thousands of faults a frame. Call once at
+/// start-up.
 pub fn keep_freed_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: mallopt only sets allocator parameters; it is safe to call at any time.

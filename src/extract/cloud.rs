@@ -5,7 +5,7 @@
 //! and y_v computed once per column and row, so a point costs two products where it is
 //! read. A stored cloud was three times the depth's size (12 bytes a pixel), written once
 //! and read whole twice or more a frame (the fits' points, growth, the grown regions'
-//! points): at 640x480, 3.7 MB that no cache holds. The products are the ones the stored
+//! points), too large for any cache at 640x480. The products are the ones the stored
 //! cloud held, so every reader sees the same bits.
 
 use std::ops::Range;

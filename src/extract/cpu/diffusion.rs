@@ -85,8 +85,8 @@ const LANES: usize = 64;
 /// How many lines a task solves side by side, of `lines` in all: LANES, or 32 or 16 where
 /// that spreads them more evenly over the pool's threads. Modelled as rounds of one task
 /// per thread, a round as long as its widest task: 320 columns are 5 tasks of 64 (rounds
-/// of 64, 64 and 64 on two threads, one idle in the last) or 10 of 32 (5 rounds of 32);
-/// two threads' diffusion at 320x240 in 0.8x. On one thread every choice costs the same,
+/// of 64, 64 and 64 on two threads, one idle in the last) or 10 of 32 (5 rounds of 32).
+/// On one thread every choice costs the same,
 /// and LANES stays. The bits do not depend on it: each line is solved on its own.
 fn lanes_for(lines: usize) -> usize {
     let threads = rayon::current_num_threads();
@@ -381,7 +381,7 @@ fn solve_down_portable(
 ) {
     // Lane counts known when compiled: a full band's and the last band's of the usual
     // image sizes (240 and 480 rows leave 48 and 32). Their per-lane loops are then whole
-    // vectors kept in registers, not loops over arrays on the stack: the solve in 0.75x.
+    // vectors kept in registers, not loops over arrays on the stack.
     match lanes {
         LANES => solve_lanes::<LANES>(src, stride, lanes, step, e, out, into),
         48 => solve_lanes::<48>(src, stride, lanes, step, e, out, into),
