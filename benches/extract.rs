@@ -5,8 +5,8 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use polymap::config::PipelineConfig;
 use polymap::extract::cloud::Cloud;
-use polymap::extract::cpu::{boundary, classify, diffusion, gradient, normals, ransac};
-use polymap::extract::{depth_metres, extract_cpu, extract_gpu, gpu::Gpu, segment::Segmentation};
+use polymap::extract::cpu::{boundary, diffusion, gradient, hysteresis, normals, ransac};
+use polymap::extract::{depth_metres, extract_cpu, extract_gpu, gpu::Gpu, regions::Segmentation};
 use polymap::synth::{NoiseModel, Scene, SceneKind, noisy_depth, path::trajectory, render};
 use polymap::types::{DepthFrame, Intrinsics};
 
@@ -29,11 +29,11 @@ fn bench(c: &mut Criterion) {
         let planes = normals::normal_planes(&smoothed, &intr, 5);
         c.bench_function(&format!("cpu edges {size}"), |b| {
             b.iter(|| {
-                let e = classify::canny(&gradient::gradient_of_planes(&planes), 0.05, 0.1);
+                let e = hysteresis::canny(&gradient::gradient_of_planes(&planes), 0.05, 0.1);
                 boundary::boundary(&e, &smoothed, 0.03, &planes, cfg.closing_kernel_px, 5)
             })
         });
-        let e = classify::canny(&gradient::gradient_of_planes(&planes), 0.05, 0.1);
+        let e = hysteresis::canny(&gradient::gradient_of_planes(&planes), 0.05, 0.1);
         let boundary = boundary::boundary(&e, &smoothed, 0.03, &planes, cfg.closing_kernel_px, 5);
         c.bench_function(&format!("cpu regions {size}"), |b| b.iter(|| Segmentation::components(&boundary, 30)));
         let seg = Segmentation::components(&boundary, 30);

@@ -77,8 +77,9 @@ fn main() -> anyhow::Result<()> {
     let mut map = polymap::map::persist::initial_map(&config.map);
     let mut extractor = polymap::extract::Extractor::new(&config.pipeline)?;
     for k in [0, 10, 20] {
-        let (frame, stages, _) = extractor.extract(&seq.depth(k)?, &seq.intrinsics)?;
-        map.update(&frame.polygons, &seq.poses[k].transform, &seq.intrinsics, Some(&stages.depth));
+        let extraction = extractor.extract(&seq.depth(k)?, &seq.intrinsics)?;
+        let polygons = &extraction.polygons.polygons;
+        map.update(polygons, &seq.poses[k].transform, &seq.intrinsics, Some(&extraction.depth));
     }
     let mut snapshot = map.snapshot();
     snapshot.polygons.truncate(3);

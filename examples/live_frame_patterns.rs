@@ -34,8 +34,8 @@ fn main() -> Result<()> {
     let mut extractor = Extractor::new(&config.pipeline)?;
     let mut frames = Vec::new();
     for k in 0..seq.len() {
-        let (polygons, stages, _) = extractor.extract(&seq.depth(k)?, &seq.intrinsics)?;
-        frames.push((polygons.polygons, stages.depth));
+        let extraction = extractor.extract(&seq.depth(k)?, &seq.intrinsics)?;
+        frames.push((extraction.polygons.polygons, extraction.depth));
     }
     let n = seq.len();
     let frame_rate = 1e9 * (n - 1) as f64 / (seq.poses[n - 1].stamp_ns - seq.poses[0].stamp_ns) as f64;

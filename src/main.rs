@@ -312,13 +312,15 @@ fn run(cli: Cli) -> Result<()> {
             let depth = s.depth(frame)?;
             let mut extractor = extract::Extractor::new(&config.pipeline)?;
             extractor.keep_images = debug.is_some();
-            let (result, stages, times) = extractor.extract(&depth, &s.intrinsics)?;
-            tracing::info!("frame {frame}: {} polygons in {:.1} ms", result.polygons.len(), times.total);
+            let extraction = extractor.extract(&depth, &s.intrinsics)?;
+            let count = extraction.polygons.polygons.len();
+            tracing::info!("frame {frame}: {count} polygons in {:.1} ms", extraction.times.total);
             if let Some(dir) = &debug {
-                extract::debug::write_stage_images(dir, &stages, &result.polygons, &s.intrinsics)?;
+                extract::debug::write_stage_images(dir, &extraction, &s.intrinsics)?;
                 // Not on stdout: without --out, stdout carries the JSON alone.
                 tracing::info!("stage pictures in {}", dir.display());
             }
+            let result = extraction.polygons;
             let polygons: Vec<_> = if world {
                 result.polygons.iter().map(|p| p.transformed(&s.poses[frame].transform)).collect()
             } else {

@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 
 use crate::config::Config;
-use crate::extract::Extractor;
+use crate::extract::{Extraction, Extractor};
 use crate::map::{MapUpdate, PolygonMap, persist};
 use crate::sequence::Sequence;
 
@@ -23,8 +23,8 @@ pub fn replay(
     let mut last_save = Instant::now();
     for k in 0..seq.len() {
         let depth = seq.depth(k)?;
-        let (frame, stages, _) = extractor.extract(&depth, &seq.intrinsics)?;
-        let update = map.update(&frame.polygons, &seq.poses[k].transform, &seq.intrinsics, Some(&stages.depth));
+        let Extraction { polygons, depth, .. } = extractor.extract(&depth, &seq.intrinsics)?;
+        let update = map.update(&polygons.polygons, &seq.poses[k].transform, &seq.intrinsics, Some(&depth));
         on_frame(k, &update);
         if last_save.elapsed() >= period {
             persist::save_configured(map, &config.map)?;

@@ -1,5 +1,6 @@
 //! Planar rings of 3-D vertices (outlines and holes, no closing repeat), for the
-//! extractor's polygons and the map's shapes alike; and rings drawn onto a pixel grid.
+//! extractor's polygons and the map's shapes alike; rings drawn onto a pixel grid; 2-D rings
+//! moved along their edges' normals (a polygon's half-pixel offset, the map's insets).
 
 use nalgebra::Vector3;
 
@@ -102,4 +103,34 @@ pub fn distance_xy(ring: &[[f64; 3]], q: [f64; 2]) -> f64 {
         nearest = nearest.min((a[0] + t * dx - q[0]).hypot(a[1] + t * dy - q[1]));
     }
     if inside { 0.0 } else { nearest }
+}
+
+/// The ring with vertex i moved so that both its edges move `d[i]` away from the ring's
+/// inside (d < 0: towards it), whichever way the ring winds: along the bisector of the
+/// edges' normals, the shift capped at 2|d[i]| on sharp corners.
+pub fn offset_vertices(ring: &[[f64; 2]], d: &[f64]) -> Vec<[f64; 2]> {
+    let n = ring.len();
+    if n < 3 {
+        return ring.to_vec();
+    }
+    // Twice the signed area: its sign says which side of each edge is inside.
+    let area2: f64 = (0..n).map(|i| ring[i][0] * ring[(i + 1) % n][1] - ring[(i + 1) % n][0] * ring[i][1]).sum();
+    let side = if area2 > 0.0 { 1.0 } else { -1.0 };
+    // Outward unit normal of edge i (from vertex i to i + 1).
+    let normal = |i: usize| {
+        let (a, b) = (ring[i], ring[(i + 1) % n]);
+        let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
+        let len = ex.hypot(ey).max(1e-12);
+        [side * ey / len, -side * ex / len]
+    };
+    (0..n)
+        .map(|i| {
+            let (a, b) = (normal((i + n - 1) % n), normal(i));
+            let (sx, sy) = (a[0] + b[0], a[1] + b[1]);
+            let dot = (sx * a[0] + sy * a[1]).max(1e-6);
+            // Along the bisector, far enough that both edges move by d.
+            let scale = (d[i] / dot).clamp(-2.0 * d[i].abs(), 2.0 * d[i].abs());
+            [ring[i][0] + sx * scale, ring[i][1] + sy * scale]
+        })
+        .collect()
 }

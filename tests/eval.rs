@@ -12,7 +12,7 @@ fn straight_stairs_at_640_meet_the_single_frame_targets() {
     let truth = seq.truth.as_ref().unwrap();
     let mut scores = Vec::new();
     for k in 0..seq.len() {
-        let (out, _, _) = extract_cpu(&seq.depth(k).unwrap(), &seq.intrinsics, &PipelineConfig::default()).unwrap();
+        let out = extract_cpu(&seq.depth(k).unwrap(), &seq.intrinsics, &PipelineConfig::default()).unwrap().polygons;
         scores.extend(score_frame(
             k,
             &out.polygons,
@@ -44,7 +44,7 @@ fn a_polygon_that_misses_its_tread_scores_zero() {
     // The same frame scored against polygons moved 1 m sideways finds nothing.
     let seq = Sequence::open("mock_frames/straight_640").unwrap();
     let truth = seq.truth.as_ref().unwrap();
-    let (out, _, _) = extract_cpu(&seq.depth(3).unwrap(), &seq.intrinsics, &PipelineConfig::default()).unwrap();
+    let out = extract_cpu(&seq.depth(3).unwrap(), &seq.intrinsics, &PipelineConfig::default()).unwrap().polygons;
     let shift = nalgebra::Isometry3::translation(1.0, 0.0, 0.0);
     let moved: Vec<_> = out.polygons.iter().map(|p| p.transformed(&shift)).collect();
     let good = score_frame(3, &out.polygons, &seq.poses[3].transform, &seq.labels(3).unwrap(), truth, &seq.intrinsics);
@@ -70,7 +70,7 @@ fn the_small_objects_config_segments_the_real_abw_blocks_into_their_faces() {
         let truth = FaceTruth::open(&dir).unwrap();
         let depth = seq.depth(0).unwrap();
         for (config, scores) in [(&small, &mut with_small), (&stairs, &mut with_stairs)] {
-            let (out, _, _) = extract_cpu(&depth, &seq.intrinsics, config).unwrap();
+            let out = extract_cpu(&depth, &seq.intrinsics, config).unwrap().polygons;
             let regions = polygon_regions(&out.polygons, &depth, &seq.intrinsics);
             scores.push(hoover(&truth, &regions, &polygon_normals(&out.polygons), 0.8));
         }
@@ -103,7 +103,8 @@ fn every_tread_in_clear_view_is_found_on_every_frame_and_none_is_tilted_over_a_d
         let bar = 1500 * seq.intrinsics.pixel_count() / (320 * 240);
         let (mut scored, mut in_clear_view) = (0, 0);
         for k in 0..seq.len() {
-            let (out, _, _) = extract_cpu(&seq.depth(k).unwrap(), &seq.intrinsics, &PipelineConfig::default()).unwrap();
+            let out =
+                extract_cpu(&seq.depth(k).unwrap(), &seq.intrinsics, &PipelineConfig::default()).unwrap().polygons;
             let labels = seq.labels(k).unwrap();
             for s in score_frame(k, &out.polygons, &seq.poses[k].transform, &labels, truth, &seq.intrinsics) {
                 scored += 1;

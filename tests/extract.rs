@@ -4,8 +4,8 @@
 use nalgebra::Vector3;
 use polymap::config::PipelineConfig;
 use polymap::extract::cloud::Cloud;
-use polymap::extract::cpu::{classify, diffusion, gradient, morphology, normals, ransac};
-use polymap::extract::{ExtractError, Grid, extract_cpu};
+use polymap::extract::cpu::{diffusion, gradient, hysteresis, morphology, normals, ransac};
+use polymap::extract::{ExtractError, Extraction, Grid, extract_cpu};
 use polymap::synth::{NoiseModel, Scene, SceneKind, noisy_depth, path::trajectory, render};
 use polymap::types::{DepthFrame, Intrinsics};
 
@@ -179,7 +179,7 @@ fn canny_finds_the_fold_between_two_planes_and_nothing_on_one() {
     let i = intr(80, 60);
     let flat = plane_depth(&i, Vector3::new(0.0, -0.6, -0.8), 1.2);
     let n = normals::normals(&flat, &i, 5);
-    let edges = classify::canny(&gradient::normal_gradient(&n), 0.05, 0.1);
+    let edges = hysteresis::canny(&gradient::normal_gradient(&n), 0.05, 0.1);
     assert_eq!(edges.data.iter().filter(|&&e| e != 0).count(), 0, "a plane has no edges");
 
     // A valley: two planes tilted 30 deg either way, meeting along the optical axis's column.
@@ -187,7 +187,7 @@ fn canny_finds_the_fold_between_two_planes_and_nothing_on_one() {
     let b = plane_depth(&i, Vector3::new(-0.5, 0.0, -0.866), 1.0);
     let roof = Grid { data: a.data.iter().zip(&b.data).map(|(x, y)| x.max(*y)).collect(), ..a };
     let n = normals::normals(&roof, &i, 5);
-    let edges = classify::canny(&gradient::normal_gradient(&n), 0.05, 0.1);
+    let edges = hysteresis::canny(&gradient::normal_gradient(&n), 0.05, 0.1);
     for v in 5..55 {
         let row: Vec<usize> = (0..80).filter(|&u| edges.data[v * 80 + u] != 0).collect();
         assert!(!row.is_empty() && row.iter().all(|&u| (36..=43).contains(&u)), "row {v}: edges at {row:?}");
@@ -268,7 +268,7 @@ fn frame(
 #[test]
 fn stair_frame_yields_level_treads_at_the_right_heights() {
     let (depth, i, pose, scene) = frame(SceneKind::Straight, 320, 20, 2.0);
-    let (out, _, _) = extract_cpu(&depth, &i, &PipelineConfig::default()).unwrap();
+    let out = extract_cpu(&depth, &i, &PipelineConfig::default()).unwrap().polygons;
     let rise = scene.stair.as_ref().unwrap().rise;
     let mut treads = 0;
     for p in &out.polygons {
@@ -292,7 +292,7 @@ fn stair_frame_yields_level_treads_at_the_right_heights() {
 fn every_vertex_says_what_it_lies_on_and_does_lie_there() {
     use polymap::extract::{VertexKind, polygon::BORDER_PX};
     let (depth, i, _, _) = frame(SceneKind::Straight, 320, 20, 2.0);
-    let (out, _, _) = extract_cpu(&depth, &i, &PipelineConfig::default()).unwrap();
+    let out = extract_cpu(&depth, &i, &PipelineConfig::default()).unwrap().polygons;
     let (mut cuts, mut borders, mut inside) = (0, 0, 0);
     for p in &out.polygons {
         assert_eq!(p.boundary_kinds.len(), p.boundary.len(), "polygon {}", p.id);
@@ -343,7 +343,7 @@ fn a_tread_running_off_the_top_of_the_image_ends_near_its_back_edge() {
     let pose = trajectory(&scene, 180)[45];
     let pixels = noisy_depth(&render(&scene, &i, &pose), &NoiseModel::l515(2.0), 4, 45);
     let depth = DepthFrame { stamp_ns: 0, width: i.width, height: i.height, depth_scale: i.depth_scale, pixels };
-    let (out, _, _) = extract_cpu(&depth, &i, &PipelineConfig::default()).unwrap();
+    let out = extract_cpu(&depth, &i, &PipelineConfig::default()).unwrap().polygons;
     let tread = out
         .polygons
         .iter()
@@ -361,7 +361,7 @@ fn a_tread_running_off_the_top_of_the_image_ends_near_its_back_edge() {
 fn all_invalid_frame_gives_no_polygons_and_a_bad_frame_an_error() {
     let i = intr(64, 48);
     let empty = DepthFrame { stamp_ns: 5, width: 64, height: 48, depth_scale: 0.00025, pixels: vec![0; 64 * 48] };
-    let (out, stages, _) = extract_cpu(&empty, &i, &PipelineConfig::default()).unwrap();
+    let Extraction { polygons: out, stages, .. } = extract_cpu(&empty, &i, &PipelineConfig::default()).unwrap();
     assert!(out.polygons.is_empty());
     assert!(stages.images.expect("the CPU keeps its images").smoothed.data.iter().all(|z| *z == 0.0));
     let short = DepthFrame { pixels: vec![0; 100], ..empty.clone() };
@@ -374,7 +374,7 @@ fn all_invalid_frame_gives_no_polygons_and_a_bad_frame_an_error() {
 /// between them in the boundary map: one region that leaks across two surfaces.
 #[test]
 fn a_region_leaking_across_two_planes_is_split_and_both_are_fitted() {
-    use polymap::extract::segment::Segmentation;
+    use polymap::extract::regions::Segmentation;
     let i = intr(160, 120);
     let floor = plane_depth(&i, Vector3::new(0.0, -0.8, -0.6), 1.0);
     // A step 20 cm up: parallel, so the two planes never meet in view.
@@ -422,7 +422,10 @@ fn a_region_leaking_across_two_planes_is_split_and_both_are_fitted() {
 #[test]
 fn a_piece_split_off_a_leak_joins_its_own_plane_across_a_gap() {
     use polymap::extract::cpu::ransac::PointBatch;
-    use polymap::extract::{MIN_REGION_PIXELS, StageTimes, segment::Segmentation, segment_and_fit};
+    use polymap::extract::{
+        MIN_REGION_PIXELS, StageTimes,
+        regions::{Segmentation, segment_and_fit},
+    };
     let (w, h) = (160usize, 120usize);
     let i = intr(w as u32, h as u32);
     let floor = plane_depth(&i, Vector3::new(0.0, -0.8, -0.6), 1.0);
@@ -457,7 +460,7 @@ fn a_piece_split_off_a_leak_joins_its_own_plane_across_a_gap() {
 
 #[test]
 fn regions_grow_back_over_their_own_plane_but_not_onto_another() {
-    use polymap::extract::segment::Segmentation;
+    use polymap::extract::regions::Segmentation;
     let i = intr(100, 80);
     // A floor with a 10 cm step up beyond column 60.
     let low = plane_depth(&i, Vector3::new(0.0, -0.8, -0.6), 1.0);
@@ -494,7 +497,7 @@ fn regions_grow_back_over_their_own_plane_but_not_onto_another() {
 
 #[test]
 fn at_an_inner_corner_each_region_takes_back_only_its_own_surface() {
-    use polymap::extract::segment::Segmentation;
+    use polymap::extract::regions::Segmentation;
     let i = intr(320, 240);
     // A floor 1 m below the camera (tilted 37 deg down) and a riser-like wall facing
     // the camera, meeting in a horizontal line through the image centre.
@@ -536,7 +539,7 @@ fn at_an_inner_corner_each_region_takes_back_only_its_own_surface() {
 
 #[test]
 fn outlines_cover_their_pixels_squares_and_holes_shrink() {
-    use polymap::extract::contours::offset_ring;
+    use polymap::extract::regions::contours::offset_ring;
     use polymap::ring::fill_rings;
     // A 10 x 6 block of pixels has its centres' outline from (2,3) to (11,8).
     let centres = vec![[2.0, 3.0], [11.0, 3.0], [11.0, 8.0], [2.0, 8.0]];
@@ -627,7 +630,7 @@ fn a_polygon_is_cut_at_a_neighbour_plane_that_meets_it_and_bounds_its_points_and
 
 #[test]
 fn regions_meet_along_a_crease_not_across_a_wide_gap_a_depth_step_or_a_corner() {
-    use polymap::extract::segment::Segmentation;
+    use polymap::extract::regions::Segmentation;
     // Region A: columns 0..15, region B: from column 15 + gap on, both 20 rows; `far` puts
     // B that much further from the camera than A's 1 m.
     let meet = |gap: usize, far: f32| {
@@ -705,7 +708,7 @@ fn a_frame_is_the_same_on_any_number_of_threads() {
     let run = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         let mut extractor = Extractor::new(&cfg).unwrap();
-        (0..3).map(|_| pool.install(|| extractor.extract(&depth, &i).unwrap().0)).collect::<Vec<_>>()
+        (0..3).map(|_| pool.install(|| extractor.extract(&depth, &i).unwrap().polygons)).collect::<Vec<_>>()
     };
     let one = run(1);
     assert!(one[0].polygons.len() >= 3, "{} polygons", one[0].polygons.len());
@@ -750,7 +753,7 @@ fn pieces_of_one_plane_cut_apart_by_dropouts_are_joined_into_one_region_and_noth
 
 #[test]
 fn pieces_of_one_plane_cut_apart_across_the_rows_are_bridged_down_the_columns() {
-    use polymap::extract::segment::Segmentation;
+    use polymap::extract::regions::Segmentation;
     use polymap::grid::label_components;
     // A wall strip 12 wide and 160 tall, rows 70..76 boundary and 71..75 without depth:
     // the pieces above and below face each other down the columns only.
@@ -778,8 +781,8 @@ fn join_strip(
     h: usize,
     cuts: &[usize],
     depth_of: impl Fn(usize, usize) -> f32,
-) -> (usize, polymap::extract::segment::Segmentation, Vec<Option<ransac::PlaneFit>>) {
-    use polymap::extract::segment::Segmentation;
+) -> (usize, polymap::extract::regions::Segmentation, Vec<Option<ransac::PlaneFit>>) {
+    use polymap::extract::regions::Segmentation;
     let i = intr(w as u32, h as u32);
     let cut = |u: usize| cuts.iter().any(|&c| (c..c + 6).contains(&u));
     let depth = Grid {
@@ -917,7 +920,7 @@ fn the_same_pixels_three_times_further_give_the_same_tilt_and_three_times_the_of
 
 #[test]
 fn a_sample_of_every_k_th_point_stands_for_all_of_them() {
-    use polymap::extract::segment::PointSample;
+    use polymap::extract::regions::PointSample;
     use polymap::extract::uncertainty::{halves_agreement, plane_uncertainty};
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};

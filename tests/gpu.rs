@@ -12,8 +12,8 @@ use polymap::config::PipelineConfig;
 use polymap::extract::cpu::components::{components_oracle, dense_from_roots};
 use polymap::extract::cpu::{self, classify, diffusion, gradient, hysteresis, morphology, normals, ransac};
 use polymap::extract::gpu::{DepthUpload, Gpu};
-use polymap::extract::segment::Segmentation;
-use polymap::extract::{Grid, Images, MIN_REGION_PIXELS, depth_metres, extract_cpu, extract_gpu};
+use polymap::extract::regions::Segmentation;
+use polymap::extract::{Extraction, Grid, Images, MIN_REGION_PIXELS, depth_metres, extract_cpu, extract_gpu};
 use polymap::grid::label_components;
 use polymap::sequence::Sequence;
 use polymap::types::{DepthFrame, Intrinsics};
@@ -109,8 +109,9 @@ fn whole_frames_give_the_same_polygons_on_both_twins() {
     let mut compared = 0;
     for (name, seq, k) in mock_frames(5) {
         let frame = seq.depth(k).unwrap();
-        let (c, _, _) = extract_cpu(&frame, &seq.intrinsics, &cfg).unwrap();
-        let (g, stages, times) = extract_gpu(&mut gpu, &frame, &seq.intrinsics, &cfg, false).unwrap();
+        let c = extract_cpu(&frame, &seq.intrinsics, &cfg).unwrap().polygons;
+        let Extraction { polygons: g, stages, times, .. } =
+            extract_gpu(&mut gpu, &frame, &seq.intrinsics, &cfg, false).unwrap();
         assert!(stages.images.is_none(), "{name} frame {k}: images read back unasked");
         if gpu.has_timestamps() {
             // The submit's span holds its stages (and the gaps between them).

@@ -42,8 +42,8 @@ fn extracted(seq: &Sequence, config: &Config) -> Vec<(FramePolygons, Grid<f32>)>
     let mut extractor = Extractor::new(&config.pipeline).unwrap();
     (0..seq.len())
         .map(|k| {
-            let (polygons, stages, _) = extractor.extract(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
-            (polygons, stages.depth)
+            let extraction = extractor.extract(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
+            (extraction.polygons, extraction.depth)
         })
         .collect()
 }

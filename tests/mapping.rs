@@ -7,7 +7,7 @@ use std::process::Command;
 
 use polymap::config::{Backend, Config};
 use polymap::eval::map::{MapSummary, score_map, summarise};
-use polymap::extract::{Extractor, depth_metres};
+use polymap::extract::{Extraction, Extractor, depth_metres};
 use polymap::map::{Label, PolygonMap};
 use polymap::sequence::Sequence;
 use polymap::synth::{self, NoiseModel, SceneKind, SynthOptions, scene};
@@ -30,9 +30,10 @@ fn map_sequence(seq: &Sequence, configs: &[Config]) -> Vec<(PolygonMap, MapSumma
     let mut extractor = Extractor::new(&configs[0].pipeline).unwrap();
     let mut maps: Vec<PolygonMap> = configs.iter().map(|c| PolygonMap::new(&c.map)).collect();
     for k in 0..seq.len() {
-        let (frame, stages, _) = extractor.extract(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
+        let Extraction { polygons: frame, depth, .. } =
+            extractor.extract(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
         for map in &mut maps {
-            let update = map.update(&frame.polygons, &seq.poses[k].transform, &seq.intrinsics, Some(&stages.depth));
+            let update = map.update(&frame.polygons, &seq.poses[k].transform, &seq.intrinsics, Some(&depth));
             assert!(update.rejected.is_empty(), "{:?}", update.rejected);
         }
     }
@@ -132,7 +133,7 @@ fn a_moved_box_is_cleared_within_five_frames() {
             depth_scale: intr.depth_scale,
             pixels: synth::noisy_depth(&render, &noise, 3, k),
         };
-        let (polys, _, _) = extractor.extract(&frame, &intr).unwrap();
+        let polys = extractor.extract(&frame, &intr).unwrap().polygons;
         let depth = depth_metres(&frame, &intr).unwrap();
         map.update(&polys.polygons, pose, &intr, Some(&depth));
         if k == MOVE_AT - 1 {

@@ -118,8 +118,8 @@ fn the_extractor_finds_the_same_polygons_in_the_bag_as_in_its_sequence() {
     let ks: Vec<usize> = [0, 1, 12, 29].into_iter().filter(|&k| played(k).is_some()).collect();
     assert!(ks.len() >= 3, "frames 0, 1, 12 and 29: {ks:?} played");
     for k in ks {
-        let (from_bag, _, _) = polymap::extract::extract_cpu(played(k).unwrap(), &intr, &cfg).unwrap();
-        let (from_seq, _, _) = polymap::extract::extract_cpu(&seq.depth(k).unwrap(), &seq.intrinsics, &cfg).unwrap();
+        let from_bag = polymap::extract::extract_cpu(played(k).unwrap(), &intr, &cfg).unwrap().polygons;
+        let from_seq = polymap::extract::extract_cpu(&seq.depth(k).unwrap(), &seq.intrinsics, &cfg).unwrap().polygons;
         assert_eq!(from_bag.polygons.len(), from_seq.polygons.len(), "frame {k}");
         assert!(!from_seq.polygons.is_empty());
         for (a, b) in from_bag.polygons.iter().zip(&from_seq.polygons) {

@@ -20,7 +20,7 @@ pub fn bench(s: &Sequence, config: &Config, frames: usize, json: bool) -> Result
     let started = std::time::Instant::now();
     let mut times = Vec::with_capacity(frames);
     for k in 0..frames {
-        times.push(extractor.extract(&depth[k % depth.len()], &s.intrinsics)?.2);
+        times.push(extractor.extract(&depth[k % depth.len()], &s.intrinsics)?.times);
         bar.inc(1);
     }
     let wall = started.elapsed().as_secs_f64();

@@ -20,7 +20,7 @@ pub fn evaluate(s: &Sequence, config: &Config, json: bool, debug: Option<&Path>)
     let bar = progress(s.len() as u64, "eval");
     let mut scores = Vec::new();
     for k in 0..s.len() {
-        let (result, _, _) = extractor.extract(&s.depth(k)?, &s.intrinsics)?;
+        let result = extractor.extract(&s.depth(k)?, &s.intrinsics)?.polygons;
         let labels = s.labels(k)?;
         scores.extend(eval::score_frame(k, &result.polygons, &s.poses[k].transform, &labels, truth, &s.intrinsics));
         if let Some(dir) = debug {
@@ -132,7 +132,7 @@ pub fn evaluate_segmentation(
         }
         for k in 0..s.len() {
             let depth = s.depth(k)?;
-            let (result, _, _) = extractor.extract(&depth, &s.intrinsics)?;
+            let result = extractor.extract(&depth, &s.intrinsics)?.polygons;
             let regions = polygon_regions(&result.polygons, &depth, &s.intrinsics);
             let score = hoover(&truth, &regions, &polygon_normals(&result.polygons), tolerance);
             let name = if s.len() == 1 { d.display().to_string() } else { format!("{} frame {k}", d.display()) };

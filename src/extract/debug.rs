@@ -5,22 +5,18 @@ use std::path::Path;
 use image::{Rgb, RgbImage};
 use nalgebra::Point3;
 
-use super::{Polygon, Stages};
+use super::{Extraction, Polygon};
 use crate::types::Intrinsics;
 use crate::viz;
 
 /// Writes 1_depth, 2_smoothed, 3_normals, 4_edges, 5_regions and 6_polygons PNGs into
 /// `dir` (2-4 only when the stages kept their images: `Extractor::keep_images` on the GPU).
-pub fn write_stage_images(
-    dir: &Path,
-    stages: &Stages,
-    polygons: &[Polygon],
-    intr: &Intrinsics,
-) -> image::ImageResult<()> {
+pub fn write_stage_images(dir: &Path, frame: &Extraction, intr: &Intrinsics) -> image::ImageResult<()> {
+    let (stages, polygons) = (&frame.stages, &frame.polygons.polygons);
     std::fs::create_dir_all(dir)?;
     let (w, h) = (intr.width, intr.height);
-    let (near, far) = viz::percentile_range(stages.depth.data.iter().filter(|&&d| d > 0.0).map(|&d| d as f64));
-    let depth = viz::depth_image(w, h, |i| stages.depth.data[i] as f64, near, far);
+    let (near, far) = viz::percentile_range(frame.depth.data.iter().filter(|&&d| d > 0.0).map(|&d| d as f64));
+    let depth = viz::depth_image(w, h, |i| frame.depth.data[i] as f64, near, far);
     depth.save(dir.join("1_depth.png"))?;
     if let Some(images) = &stages.images {
         viz::depth_image(w, h, |i| images.smoothed.data[i] as f64, near, far).save(dir.join("2_smoothed.png"))?;

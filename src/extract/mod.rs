@@ -8,13 +8,12 @@
 //! orchestration (`extract_with`) runs a frame on either twin.
 
 pub mod cloud;
-pub mod contours;
 pub mod cpu;
 pub mod debug;
 pub mod gpu;
 pub mod params;
 pub mod polygon;
-pub mod segment;
+pub mod regions;
 pub mod trim;
 pub mod uncertainty;
 
@@ -25,11 +24,10 @@ use crate::config::{Backend, PipelineConfig};
 pub use crate::grid::Grid;
 use crate::types::{DepthFrame, Intrinsics};
 use cloud::Cloud;
-use contours::Region;
 use cpu::ransac::{PlaneFit, PointBatch};
 pub use params::{Images, MIN_REGION_PIXELS, StageTimes};
 pub use polygon::{FramePolygons, Polygon, VertexKind, build_polygons};
-use segment::{Creases, MAX_SAMPLE_POINTS, PointSample, Segmentation};
+use regions::{Outline, Segmentation, segment_and_fit};
 
 /// Why a frame could not be processed.
 #[derive(Debug, thiserror::Error)]
@@ -42,15 +40,24 @@ pub enum ExtractError {
     Gpu(#[from] gpu::GpuError),
 }
 
-/// What a frame went through, for the map, debug pictures and the twin comparisons.
+/// What extraction makes of one frame.
+#[derive(Clone, Debug)]
+pub struct Extraction {
+    pub polygons: FramePolygons,
+    /// The frame in metres (0: invalid): what the map checks its polygons against.
+    pub depth: Grid<f32>,
+    pub stages: Stages,
+    pub times: StageTimes,
+}
+
+/// What a frame went through, for debug pictures and the twin comparisons.
 #[derive(Clone, Debug)]
 pub struct Stages {
-    pub depth: Grid<f32>,
     /// The per-pixel stages' images: always from the CPU twin; from the GPU only when
     /// asked for (`Extractor::keep_images`), as they would be most of its readback.
     pub images: Option<Images>,
     pub labels: Grid<u32>,
-    pub regions: Vec<Region>,
+    pub regions: Vec<Outline>,
     pub fits: Vec<Option<PlaneFit>>,
 }
 
@@ -129,15 +136,11 @@ impl Extractor {
         }
     }
 
-    pub fn extract(
-        &mut self,
-        frame: &DepthFrame,
-        intr: &Intrinsics,
-    ) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
+    pub fn extract(&mut self, frame: &DepthFrame, intr: &Intrinsics) -> Result<Extraction, ExtractError> {
         // On a pool thread, whichever engine: every parallel loop of the frame (the CPU
         // twin's stages, and regions, fits and polygons after the GPU's) then starts where
         // it is called, instead of each one waking a worker and putting this thread to
-        // sleep (dozens of hand-offs a frame, 40 % of a one-thread CPU frame).
+        // sleep (dozens of hand-offs a frame; docs/speed-history.md has their cost).
         let frame_over = AtomicBool::new(false);
         rayon::scope(|s| {
             let home = rayon::current_thread_index();
@@ -150,31 +153,27 @@ impl Extractor {
         })
     }
 
-    fn extract_on_pool(
-        &mut self,
-        frame: &DepthFrame,
-        intr: &Intrinsics,
-    ) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
+    fn extract_on_pool(&mut self, frame: &DepthFrame, intr: &Intrinsics) -> Result<Extraction, ExtractError> {
         let keep = self.keep_images;
         if std::mem::take(&mut self.race_first_frame)
             && let Engine::Gpu(gpu) = &mut self.engine
         {
             // The first GPU run compiles and allocates: time the second.
             extract_with(Some(gpu), frame, intr, &self.cfg, keep)?;
-            let gpu_ms = extract_with(Some(gpu), frame, intr, &self.cfg, keep)?.2.total;
+            let gpu_ms = extract_with(Some(gpu), frame, intr, &self.cfg, keep)?.times.total;
             let cpu = extract_cpu(frame, intr, &self.cfg)?;
             let name = gpu.describe();
-            if cpu.2.total < gpu_ms {
+            if cpu.times.total < gpu_ms {
                 tracing::info!(
                     "extraction on the CPU twin: the only adapter, {name}, is software and slower ({gpu_ms:.1} ms vs {:.1} ms a frame)",
-                    cpu.2.total
+                    cpu.times.total
                 );
                 self.engine = Engine::Cpu;
                 return Ok(cpu);
             }
             tracing::info!(
                 "extraction on the GPU: {name} ({gpu_ms:.1} ms vs the CPU twin's {:.1} ms a frame)",
-                cpu.2.total
+                cpu.times.total
             );
         }
         let gpu = match &mut self.engine {
@@ -188,8 +187,8 @@ impl Extractor {
 /// Runs the pool's pending work until `over` is set, on a worker other than `home` (the
 /// frame's own, which returns at once: it would wait for itself), yielding the core to
 /// other threads whenever none is pending. The other workers so stay awake for the whole
-/// frame: between two parallel loops they fell asleep, and waking one (34 times a frame)
-/// took longer than most of the frame's loops; a two-thread frame in 0.84-0.86x.
+/// frame: between two parallel loops they fell asleep, and waking one took longer than
+/// most of the frame's loops.
 fn take_work_until(over: &AtomicBool, home: Option<usize>) {
     if rayon::current_thread_index() == home {
         return;
@@ -222,11 +221,7 @@ pub(crate) fn stopwatch() -> impl FnMut() -> f64 {
 }
 
 /// Extracts a frame's polygons on the CPU twin, keeping every stage's image.
-pub fn extract_cpu(
-    frame: &DepthFrame,
-    intr: &Intrinsics,
-    cfg: &PipelineConfig,
-) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
+pub fn extract_cpu(frame: &DepthFrame, intr: &Intrinsics, cfg: &PipelineConfig) -> Result<Extraction, ExtractError> {
     extract_with(None, frame, intr, cfg, true)
 }
 
@@ -238,7 +233,7 @@ pub fn extract_gpu(
     intr: &Intrinsics,
     cfg: &PipelineConfig,
     keep_images: bool,
-) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
+) -> Result<Extraction, ExtractError> {
     extract_with(Some(gpu), frame, intr, cfg, keep_images)
 }
 
@@ -251,7 +246,7 @@ pub fn extract_with(
     intr: &Intrinsics,
     cfg: &PipelineConfig,
     keep_images: bool,
-) -> Result<(FramePolygons, Stages, StageTimes), ExtractError> {
+) -> Result<Extraction, ExtractError> {
     let mut times = StageTimes::default();
     let t0 = Instant::now();
     let mut lap = stopwatch();
@@ -291,119 +286,6 @@ pub fn extract_with(
     let polygons = build_polygons(&regions, &fits, &seg, &creases, &depth, intr, cfg);
     times.polygons = lap();
     times.total = t0.elapsed().as_secs_f64() * 1e3;
-    let stages = Stages { depth, images, labels: seg.labels, regions, fits };
-    Ok((FramePolygons { stamp_ns: frame.stamp_ns, polygons }, stages, times))
-}
-
-/// At most about this many of a region's points (every k-th pixel's) are fitted before
-/// growth: those fits only steer the leak splits, the joins and the growth, and each plane
-/// kept is fitted again on every pixel of its grown region (`refit_grown`); RANSAC scores
-/// on 2048 of them (`MAX_SCORE_POINTS`). A floor at 640x480 has a hundred thousand pixels,
-/// gathered and read twice by the refit for nothing.
-const MAX_FIT_POINTS: usize = 8192;
-
-/// A grown region of more pixels than this is refitted in parts of this many, a task
-/// each (`refit_parts`): the floor of a 640x480 frame, a hundred thousand pixels, is
-/// seven.
-const REFIT_PART_PIXELS: usize = 16384;
-
-/// What segmentation hands on: the regions, their pixels, each one's plane if it has one,
-/// and which of them meet along a crease.
-pub type Segmented = (Segmentation, Vec<Region>, Vec<Option<PlaneFit>>, Creases);
-
-/// The regions' planes (`fit` is the batched RANSAC + refit of the twin), leaks split
-/// and fitted again, coplanar pieces joined, regions grown back to their true borders,
-/// outlines traced, creases found. Times the RANSAC calls as `ransac`, the rest as `contours`.
-pub fn segment_and_fit(
-    mut seg: Segmentation,
-    cloud: &Cloud,
-    cfg: &PipelineConfig,
-    mut fit: impl FnMut(&PointBatch) -> Result<Vec<Option<PlaneFit>>, ExtractError> + Send,
-    times: &mut StageTimes,
-    lap: &mut (impl FnMut() -> f64 + Send),
-) -> Result<Segmented, ExtractError> {
-    let (dist, ratio) = (cfg.ransac_inlier_distance_m as f32, cfg.depth_edge_ratio as f32);
-    let min_ratio = cfg.ransac_min_inlier_ratio;
-    // The joins' scan reads the labels and the depth, and writes nothing the fits read: it
-    // runs beside the fits' sample and the first fits (on another thread; one after the
-    // other on one), which are serial in part. It runs again only in a frame where a leak
-    // split has changed the labels (no mock frame has one).
-    let (candidates, first_fits) = rayon::join(
-        || seg.join_candidates(cloud, ratio),
-        || {
-            let all: Vec<usize> = (0..seg.pixels.len()).collect();
-            let batch = seg.sampled_points(&all, cloud, MAX_FIT_POINTS);
-            times.contours = lap();
-            let fits = fit(&batch);
-            times.ransac = lap();
-            fits
-        },
-    );
-    let mut fits = first_fits?;
-    let leaks = seg.split_leaks(&mut fits, cloud, dist, min_ratio, MIN_REGION_PIXELS);
-    let batch = seg.sampled_points(&leaks.pieces, cloud, MAX_FIT_POINTS);
-    times.contours += lap();
-    if !leaks.pieces.is_empty() {
-        for (r, f) in leaks.pieces.iter().zip(fit(&batch)?) {
-            fits[*r] = f;
-        }
-    }
-    times.ransac += lap();
-    let candidates = if leaks.split.is_empty() { candidates } else { seg.join_candidates(cloud, ratio) };
-    seg.join_coplanar(candidates, &mut fits, cloud, dist, min_ratio);
-    let accepted: Vec<bool> = fits.iter().map(|f| f.is_some_and(|f| f.inlier_ratio() >= min_ratio)).collect();
-    seg.grow(&fits, &accepted, cloud, dist, cfg.region_grow_px);
-    // Three jobs that only read the grown regions, side by side: each is a few tenths of a
-    // millisecond that its own parallel loop, held up by the largest region, barely splits.
-    let ((mut points, creases), mut regions) = rayon::join(
-        || {
-            rayon::join(
-                || refit_grown(&seg, &mut fits, &accepted, cloud, dist, min_ratio),
-                || seg.creases(cloud, ratio),
-            )
-        },
-        // Outlines only for the planes that can become polygons: the refit keeps each
-        // accepted region accepted and touches no other, so `accepted` still says which.
-        || contours::trace(&seg, cfg.simplify_tolerance_px, &accepted),
-    );
-    for (region, points) in regions.iter_mut().zip(&mut points) {
-        region.points = std::mem::take(points);
-    }
-    times.contours += lap();
-    Ok((seg, regions, fits, creases))
-}
-
-/// Fits each accepted region's plane again on its grown pixels, and hands back a sample
-/// of those pixels' points for the polygon checks (none for the other regions). Growth
-/// gives a region back the band along its border that edges and closing ate; for a thin
-/// strip (a tread cut by the image's edge, ten rows tall) that band doubles its support
-/// across, and the plane fitted without it can be tilted by a degree.
-fn refit_grown(
-    seg: &Segmentation,
-    fits: &mut [Option<PlaneFit>],
-    accepted: &[bool],
-    cloud: &Cloud,
-    dist: f32,
-    min_ratio: f64,
-) -> Vec<PointSample> {
-    use rayon::prelude::*;
-    let refits: Vec<(Option<PlaneFit>, PointSample)> = (0..fits.len())
-        .into_par_iter()
-        .map(|r| {
-            let Some(f) = fits[r].filter(|_| accepted[r]) else { return (None, PointSample::default()) };
-            let parts = seg.point_parts(r, cloud, REFIT_PART_PIXELS);
-            let refit = cpu::ransac::refit_parts(&parts, f.normal_f32(), f.offset as f32, dist);
-            (refit, PointSample::of_parts(&parts, MAX_SAMPLE_POINTS))
-        })
-        .collect();
-    refits
-        .into_iter()
-        .zip(fits.iter_mut())
-        .map(|((new, points), fit)| {
-            if let Some(new) = new.filter(|f| f.inlier_ratio() >= min_ratio) {
-                *fit = Some(new);
-            }
-            points
-        })
-        .collect()
+    let stages = Stages { images, labels: seg.labels, regions, fits };
+    Ok(Extraction { polygons: FramePolygons { stamp_ns: frame.stamp_ns, polygons }, depth, stages, times })
 }

@@ -6,9 +6,9 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::contours::Region;
 use super::cpu::ransac::PlaneFit;
-use super::segment::{Creases, Segmentation};
+use super::regions::Outline;
+use super::regions::{Creases, Segmentation};
 use super::trim;
 use super::uncertainty::{PlaneUncertainty, halves_agreement, plane_uncertainty};
 use crate::config::PipelineConfig;
@@ -117,7 +117,7 @@ pub struct FramePolygons {
 /// pixel outlines onto the planes, cut them where the planes of the neighbours they meet
 /// along a crease (`creases`) bound them, drop what is smaller than the minimum area.
 pub fn build_polygons(
-    regions: &[Region],
+    regions: &[Outline],
     fits: &[Option<PlaneFit>],
     seg: &Segmentation,
     creases: &Creases,

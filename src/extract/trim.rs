@@ -5,7 +5,7 @@
 //! growth back over it, half a pixel of outline), and on a tread seen at a grazing
 //! angle one pixel spans centimetres. The edge itself is known far better: it is where
 //! the two fitted planes meet. So a polygon that meets another along a crease (their
-//! regions touch with no depth step, segment::Creases) and whose points all lie on one
+//! regions touch with no depth step, regions::Creases) and whose points all lie on one
 //! side of that polygon's plane, give or take the inlier distance, is cut at that plane.
 //! Where its points lie on both sides (a floor around a box standing on it), the other
 //! plane does not bound it; where the two do not meet (faces of two blocks side by

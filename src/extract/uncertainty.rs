@@ -180,7 +180,7 @@ pub fn plane_uncertainty(
     // plane's foot of the camera for now and moved to the inliers' centroid after; H and
     // M from sums of x^2, xy, y^2, x, y, 1, plain and weighted by each point's g^2.
     let foot = -n * fit.offset;
-    let frame = PlaneFrame { n: n.into(), offset: fit.offset, foot: foot.into(), axes: [e1.into(), e2.into()], dist };
+    let frame = FitFrame { n: n.into(), offset: fit.offset, foot: foot.into(), axes: [e1.into(), e2.into()], dist };
     let sums = frame.inlier_sums(points);
     let (h, m, count, sum) = (sums.plain, sums.weighted, sums.count as usize, Vector3::from(sums.sum));
     if count < 4 {
@@ -220,7 +220,7 @@ pub fn plane_uncertainty(
 /// A fitted plane as `plane_uncertainty` takes its inliers' sums: the inlier distance, and
 /// lever arms x, y along `axes` from `foot` (the plane's foot of the camera).
 #[derive(Clone, Copy, Debug)]
-struct PlaneFrame {
+struct FitFrame {
     n: [f64; 3],
     offset: f64,
     foot: [f64; 3],
@@ -239,7 +239,7 @@ struct InlierSums {
     weighted: [f64; 6],
 }
 
-impl PlaneFrame {
+impl FitFrame {
     /// The sums over the points: on x86-64 eight at a time in AVX-512 or four in AVX2, the
     /// last ones (and all, elsewhere) by `inlier_sums_scalar`, the vector passes' oracle.
     fn inlier_sums(&self, points: &[[f32; 3]]) -> InlierSums {
@@ -298,7 +298,7 @@ impl InlierSums {
     }
 }
 
-/// `PlaneFrame::inlier_sums` on four points at a time, each lane summing its own points.
+/// `FitFrame::inlier_sums` on four points at a time, each lane summing its own points.
 /// The inlier test is the scalar loop's operations in the same order (no fused
 /// multiply-add), so a point is an inlier on both or on neither, and the weight is its f32
 /// operations, so the same weight; only the order of the f64 sums differs.
@@ -306,7 +306,7 @@ impl InlierSums {
 mod avx2 {
     use std::arch::x86_64::*;
 
-    use super::{InlierSums, PlaneFrame};
+    use super::{FitFrame, InlierSums};
     use crate::extract::cpu::simd::{four_points, lane_sum};
 
     /// The sums over a multiple of four points.
@@ -314,7 +314,7 @@ mod avx2 {
     /// # Safety
     /// The CPU has AVX2 and FMA.
     #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn inlier_sums(f: &PlaneFrame, points: &[[f32; 3]]) -> InlierSums {
+    pub(super) unsafe fn inlier_sums(f: &FitFrame, points: &[[f32; 3]]) -> InlierSums {
         let splat = |v: [f64; 3]| v.map(|c| _mm256_set1_pd(c));
         let ([nx, ny, nz], [fx, fy, fz], [ax, ay, az], [bx, by, bz]) =
             (splat(f.n), splat(f.foot), splat(f.axes[0]), splat(f.axes[1]));
@@ -374,7 +374,7 @@ mod avx2 {
 mod avx512 {
     use std::arch::x86_64::*;
 
-    use super::{HalvesCut, InlierSums, PlaneFit, PlaneFrame};
+    use super::{FitFrame, HalvesCut, InlierSums, PlaneFit};
     use crate::extract::cpu::simd::{eight_points, lane_sum8};
 
     /// The sums over a multiple of eight points.
@@ -382,7 +382,7 @@ mod avx512 {
     /// # Safety
     /// The CPU has AVX-512 F and VL.
     #[target_feature(enable = "avx512f,avx512vl")]
-    pub(super) unsafe fn inlier_sums(f: &PlaneFrame, points: &[[f32; 3]]) -> InlierSums {
+    pub(super) unsafe fn inlier_sums(f: &FitFrame, points: &[[f32; 3]]) -> InlierSums {
         let splat = |v: [f64; 3]| v.map(|c| _mm512_set1_pd(c));
         let ([nx, ny, nz], [fx, fy, fz], [ax, ay, az], [bx, by, bz]) =
             (splat(f.n), splat(f.foot), splat(f.axes[0]), splat(f.axes[1]));
@@ -639,7 +639,7 @@ mod tests {
         let n = Vector3::new(0.1, -0.75, -0.62).normalize();
         let (offset, dist) = (1.4, 0.01);
         let [e1, e2] = in_plane_axes(&n).expect("a unit normal");
-        let frame = PlaneFrame { n: n.into(), offset, foot: (-n * offset).into(), axes: [e1.into(), e2.into()], dist };
+        let frame = FitFrame { n: n.into(), offset, foot: (-n * offset).into(), axes: [e1.into(), e2.into()], dist };
         for size in [0usize, 3, 4, 9, 1000, 1001, 1003, 20_002] {
             // On the plane within 3 mm, every fourth point 5 cm off it.
             let points: Vec<[f32; 3]> = (0..size)

@@ -16,7 +16,7 @@ use nalgebra::Isometry3;
 use serde::Deserialize;
 
 use crate::config::Config;
-use crate::extract::Extractor;
+use crate::extract::{Extraction, Extractor};
 use crate::interface::convert;
 use crate::map::PolygonMap;
 use crate::pose::{PoseBuffer, PoseLimits, RawPose};
@@ -345,11 +345,11 @@ pub fn replay(
         match frame {
             Ok(Some((frame, intrinsics))) => match poses.lookup(frame.stamp_ns) {
                 Ok(world_body) => {
-                    let (polygons, stages, _) = extractor
+                    let Extraction { polygons, depth, .. } = extractor
                         .extract(&frame, &intrinsics)
                         .with_context(|| format!("{path}: the image stamped {} ns", frame.stamp_ns))?;
                     let t_world_camera = crate::pose::world_camera(&world_body, &body_camera);
-                    map.update(&polygons.polygons, &t_world_camera, &intrinsics, Some(&stages.depth));
+                    map.update(&polygons.polygons, &t_world_camera, &intrinsics, Some(&depth));
                     out.mapped += 1;
                 }
                 Err(_) => out.without_pose += 1,

@@ -7,8 +7,8 @@ use nalgebra::{Isometry3, Matrix3, SymmetricEigen, Vector3};
 
 use serde::{Deserialize, Serialize};
 
-use crate::extract::contours::offset_vertices;
 use crate::ring::clip_ring;
+use crate::ring::offset_vertices;
 use crate::types::Intrinsics;
 
 /// A plane n . p + d = 0 with unit n.

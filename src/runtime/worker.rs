@@ -24,7 +24,7 @@ use super::slot::Slot;
 use super::status::Counters;
 use crate::clock::now_ns;
 use crate::config::{Backend, Config};
-use crate::extract::{Extractor, FramePolygons, Polygon};
+use crate::extract::{Extraction, Extractor, FramePolygons, Polygon};
 use crate::grid::Grid;
 use crate::map::{MapPolygon, PolygonMap};
 use crate::pose::PoseBuffer;
@@ -132,7 +132,7 @@ fn extract_frames(
     while !stop.load(Ordering::Relaxed) {
         let Some((frame, intrinsics)) = slot.take(IDLE_WAIT) else { continue };
         let extracted = std::panic::catch_unwind(AssertUnwindSafe(|| extractor.extract(&frame, &intrinsics)));
-        let (polygons, stages, _) = match extracted {
+        let Extraction { polygons, depth, .. } = match extracted {
             Ok(Ok(r)) => r,
             Ok(Err(e)) => {
                 counters.extraction_failed.fetch_add(1, Ordering::Relaxed);
@@ -142,7 +142,7 @@ fn extract_frames(
             Err(panic) => return panicked("extracting a frame", panic, true),
         };
         let raw = keep_raw.then_some(frame);
-        let extracted = Extracted { polygons, depth: stages.depth, intrinsics, raw };
+        let extracted = Extracted { polygons, depth, intrinsics, raw };
         match handoff.try_send(Handoff::Frame(extracted)) {
             Ok(()) => {}
             // The map thread is a whole queue behind: this frame goes.

@@ -188,7 +188,7 @@ pub fn frames_against_sequence(frames: &[serde_json::Value], seq: &polymap::sequ
     for f in frames {
         let k = f["k"].as_u64().unwrap() as usize;
         let drift = f["drift_z"].as_f64().expect("the frame's map update");
-        let (extracted, _, _) = extractor.extract(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap();
+        let extracted = extractor.extract(&seq.depth(k).unwrap(), &seq.intrinsics).unwrap().polygons;
         let t = nalgebra::Translation3::new(0.0, 0.0, -drift) * seq.poses[k].transform;
         let offline: Vec<_> = extracted.polygons.iter().map(|p| p.transformed(&t)).collect();
         let offline = polymap::interface::convert::frame_polygons(0, "map", &offline);

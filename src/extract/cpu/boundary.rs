@@ -50,8 +50,7 @@ pub fn boundary(
 super::widest_simd! {
     /// One row of the boundary: the lines grown into their 4-neighbours (`line` the row's,
     /// `above` and `below` the neighbouring rows', as `rows_around` gives them), or `sealed`.
-    /// A kernel, as `lines_or_holes` is: as a closure it ran at SSE2 (0.51-0.54 % of a
-    /// 640x480 frame's samples on one thread; the kernel 0.36-0.44 %).
+    /// A kernel, as `lines_or_holes` is: as a closure it ran at SSE2 whatever the CPU.
     fn plus_or_sealed(line: &[u8], above: &[u8], below: &[u8], sealed: &[u8], out: &mut [u8]) = plus_or_sealed_portable
 }
 
@@ -75,7 +74,7 @@ fn plus_or_sealed_portable(line: &[u8], above: &[u8], below: &[u8], sealed: &[u8
 
 super::widest_simd! {
     /// 1 in `out` where a line (`lines`) or no normal (`valid` 0): one row. Compiled at
-    /// each width, as the closure around it was not (1.3 % of a 640x480 frame at SSE2).
+    /// each width, as the closure around it was not.
     fn lines_or_holes(lines: &[u8], valid: &[f32], out: &mut [u8]) = lines_or_holes_portable
 }
 
@@ -193,8 +192,8 @@ pub fn boundary_oracle(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::extract::cpu::classify::canny;
     use crate::extract::cpu::gradient::normal_gradient;
+    use crate::extract::cpu::hysteresis::canny;
     use crate::extract::cpu::test_frames::stair_normals;
 
     #[test]

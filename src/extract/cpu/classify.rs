@@ -1,21 +1,14 @@
 //! Non-maximum suppression and the double threshold: the CPU twin of
-//! shaders/classify.wgsl, the second half of Canny on the normal image (hysteresis, the
-//! third, is `hysteresis`).
+//! shaders/classify.wgsl, the second part of Canny on the normal image (hysteresis, the
+//! third, is `hysteresis`, with Canny whole).
 
 use super::ROWS_PER_TASK;
-use super::hysteresis::hysteresis;
 use super::widest_simd;
 use crate::extract::params::Gradient;
 use crate::grid::{Grid, par_rows};
 
 /// Offsets of the two neighbours compared in non-maximum suppression, by sector.
 pub const SECTOR_STEP: [(isize, isize); 4] = [(1, 0), (1, 1), (0, 1), (-1, 1)];
-
-/// Canny edges: 1 where the magnitude is a local maximum across the edge and joins a
-/// pixel at or above `high` through pixels at or above `low` (8-connected).
-pub fn canny(grad: &Gradient, low: f32, high: f32) -> Grid<u8> {
-    hysteresis(&classify(grad, low, high))
-}
 
 /// Non-maximum suppression and the double threshold: 0 none, 1 weak, 2 strong per pixel.
 pub fn classify(grad: &Gradient, low: f32, high: f32) -> Grid<u8> {

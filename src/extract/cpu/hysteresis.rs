@@ -2,7 +2,9 @@
 //! when its 8-connected component of edge pixels holds a strong one; the components are
 //! `grid::component_runs`' (the GPU labels them with shaders/components.wgsl first).
 
+use super::classify::classify;
 use super::components::components_oracle;
+use crate::extract::params::Gradient;
 use crate::grid::{Grid, component_runs};
 
 /// Hysteresis: 1 for strong pixels and the weak ones 8-connected to them through weak pixels.
@@ -34,6 +36,12 @@ pub fn hysteresis_oracle(class: &Grid<u8>) -> Grid<u8> {
     // keep
     let data = labels.iter().map(|&l| if l != 0 { strong[l as usize - 1] } else { 0 }).collect();
     Grid { width: class.width, height: class.height, data }
+}
+
+/// Canny edges: 1 where the magnitude is a local maximum across the edge and joins a
+/// pixel at or above `high` through pixels at or above `low` (8-connected).
+pub fn canny(grad: &Gradient, low: f32, high: f32) -> Grid<u8> {
+    hysteresis(&classify(grad, low, high))
 }
 
 #[cfg(test)]

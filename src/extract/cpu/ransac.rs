@@ -37,6 +37,16 @@ impl PlaneFit {
     pub fn inlier_ratio(&self) -> f64 {
         self.inliers as f64 / self.points.max(1) as f64
     }
+
+    /// Distance of a point to the plane, m.
+    #[inline]
+    pub fn distance(&self, p: &[f32; 3]) -> f64 {
+        (self.normal.dot(&Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64)) + self.offset).abs()
+    }
+
+    pub fn normal_f32(&self) -> [f32; 3] {
+        [self.normal.x as f32, self.normal.y as f32, self.normal.z as f32]
+    }
 }
 
 /// lowbias32 (Chris Wellons): a well-mixed 32-bit hash, plain u32 arithmetic that WGSL has too.
@@ -253,7 +263,7 @@ pub fn refit_parts<P: AsRef<[[f32; 3]]> + Sync>(parts: &[P], n: [f32; 3], d: f32
                 || inlier_moments(head, n, d, dist, o),
                 || tail.par_iter().map(|part| inlier_moments(part.as_ref(), n, d, dist, o)).collect::<Vec<_>>(),
             );
-            tail.into_iter().fold(head, Moments::plus)
+            tail.into_iter().fold(head, RefitSums::plus)
         }
     };
     if m.count < 3.0 {
@@ -297,15 +307,15 @@ fn near_plane(p: &[f32; 3], n: [f32; 3], d: f32, dist: f32) -> bool {
 /// A refit's sums over its inliers: how many, and the sums of q and of q's six distinct
 /// products (xx, xy, xz, yy, yz, zz), q being a point less the origin they are taken about.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct Moments {
+struct RefitSums {
     count: f64,
     sum: [f64; 3],
     products: [f64; 6],
 }
 
-impl Moments {
-    fn plus(self, o: Moments) -> Moments {
-        Moments {
+impl RefitSums {
+    fn plus(self, o: RefitSums) -> RefitSums {
+        RefitSums {
             count: self.count + o.count,
             sum: std::array::from_fn(|k| self.sum[k] + o.sum[k]),
             products: std::array::from_fn(|k| self.products[k] + o.products[k]),
@@ -317,7 +327,7 @@ impl Moments {
 /// to eight times), so on x86-64 they take eight points at a time in AVX-512, or four in
 /// AVX2; elsewhere, and for the last points, the scalar loops below. The same inliers
 /// either way: only the order of the f64 sums differs.
-fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 3]) -> Moments {
+fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 3]) -> RefitSums {
     #[cfg(target_arch = "x86_64")]
     {
         use super::simd::Level;
@@ -326,7 +336,7 @@ fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 
         let fast = match level {
             Level::Avx512 => unsafe { avx512::inlier_moments(full, n, d, dist, o) },
             Level::Avx2 => unsafe { avx2::inlier_moments(full, n, d, dist, o) },
-            Level::Baseline => Moments::default(),
+            Level::Baseline => RefitSums::default(),
         };
         fast.plus(inlier_moments_scalar(rest, n, d, dist, o))
     }
@@ -372,8 +382,8 @@ fn split_for_vectors(points: &[[f32; 3]]) -> (super::simd::Level, &[[f32; 3]], &
 }
 
 /// `inlier_moments`, one point after another: the oracle of the AVX2 and AVX-512 passes.
-fn inlier_moments_scalar(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 3]) -> Moments {
-    let mut m = Moments::default();
+fn inlier_moments_scalar(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 3]) -> RefitSums {
+    let mut m = RefitSums::default();
     for p in points.iter().filter(|p| near_plane(p, n, d, dist)) {
         let q = [p[0] as f64 - o[0], p[1] as f64 - o[1], p[2] as f64 - o[2]];
         m.count += 1.0;
@@ -412,7 +422,7 @@ fn support_scalar(points: &[[f32; 3]], n: [f64; 3], offset: f64, dist: f64) -> (
 mod avx2 {
     use std::arch::x86_64::*;
 
-    use super::Moments;
+    use super::RefitSums;
     use crate::extract::cpu::simd::{four_points, lane_sum};
 
     /// `inlier_moments` of a multiple of four points.
@@ -420,7 +430,7 @@ mod avx2 {
     /// # Safety
     /// The CPU has AVX2 and FMA.
     #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 3]) -> Moments {
+    pub(super) unsafe fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 3]) -> RefitSums {
         let [nx, ny, nz, d, dist] = [n[0], n[1], n[2], d, dist].map(|v| _mm_set1_ps(v));
         let (abs, one) = (_mm_castsi128_ps(_mm_set1_epi32(i32::MAX)), _mm_set1_ps(1.0));
         let [ox, oy, oz] = o.map(|v| _mm256_set1_pd(v));
@@ -449,7 +459,7 @@ mod avx2 {
             acc[9] = _mm256_fmadd_pd(qz, qz, acc[9]);
         }
         let t = acc.map(|v| lane_sum(v));
-        Moments { count: t[0], sum: [t[1], t[2], t[3]], products: [t[4], t[5], t[6], t[7], t[8], t[9]] }
+        RefitSums { count: t[0], sum: [t[1], t[2], t[3]], products: [t[4], t[5], t[6], t[7], t[8], t[9]] }
     }
 
     /// `support` of a multiple of four points.
@@ -489,7 +499,7 @@ mod avx2 {
 mod avx512 {
     use std::arch::x86_64::*;
 
-    use super::Moments;
+    use super::RefitSums;
     use crate::extract::cpu::simd::{eight_points, lane_sum8};
 
     /// `inlier_moments` of a multiple of eight points.
@@ -497,7 +507,7 @@ mod avx512 {
     /// # Safety
     /// The CPU has AVX-512 F and VL.
     #[target_feature(enable = "avx512f,avx512vl")]
-    pub(super) unsafe fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 3]) -> Moments {
+    pub(super) unsafe fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 3]) -> RefitSums {
         let [nx, ny, nz, d, dist] = [n[0], n[1], n[2], d, dist].map(|v| _mm256_set1_ps(v));
         let (abs, one) = (_mm256_castsi256_ps(_mm256_set1_epi32(i32::MAX)), _mm256_set1_ps(1.0));
         let [ox, oy, oz] = o.map(|v| _mm512_set1_pd(v));
@@ -529,7 +539,7 @@ mod avx512 {
             acc[9] = _mm512_fmadd_pd(qz, qz, acc[9]);
         }
         let t = acc.map(|v| lane_sum8(v));
-        Moments { count: t[0], sum: [t[1], t[2], t[3]], products: [t[4], t[5], t[6], t[7], t[8], t[9]] }
+        RefitSums { count: t[0], sum: [t[1], t[2], t[3]], products: [t[4], t[5], t[6], t[7], t[8], t[9]] }
     }
 
     /// `support` of a multiple of eight points.

@@ -21,7 +21,7 @@ use wgpu::util::DeviceExt;
 use super::cpu::ransac::{PointBatch, ScoringBatch};
 use super::params::Access::{Read, ReadWrite, Uniform};
 use super::params::*;
-use super::segment::Segmentation;
+use super::regions::Segmentation;
 use crate::config::PipelineConfig;
 use crate::grid::Grid;
 use crate::types::{DepthFrame, Intrinsics};

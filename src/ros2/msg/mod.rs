@@ -22,17 +22,10 @@ fn service_description<S: RosService>() -> Nested {
     fn parts<S: RosService>() -> Vec<Field> {
         let nested =
             |n: Nested| FieldType { type_id: type_id::NESTED, capacity: 0, string_capacity: 0, nested: Some(n) };
-        vec![
-            Field {
-                name: "request_message",
-                ty: nested(Nested { name: S::Request::TYPE_NAME, fields: S::Request::fields }),
-            },
-            Field {
-                name: "response_message",
-                ty: nested(Nested { name: S::Response::TYPE_NAME, fields: S::Response::fields }),
-            },
-            Field { name: "event_message", ty: nested(Nested { name: S::EVENT_TYPE_NAME, fields: event_fields::<S> }) },
-        ]
+        let [request, response] = request_and_response::<S>(["request_message", "response_message"], nested);
+        let event =
+            Field { name: "event_message", ty: nested(Nested { name: S::EVENT_TYPE_NAME, fields: event_fields::<S> }) };
+        vec![request, response, event]
     }
     fn event_fields<S: RosService>() -> Vec<Field> {
         let at_most_one = |n: Nested| FieldType {
@@ -41,17 +34,16 @@ fn service_description<S: RosService>() -> Nested {
             string_capacity: 0,
             nested: Some(n),
         };
-        vec![
-            Field { name: "info", ty: ServiceEventInfo::field_type() },
-            Field {
-                name: "request",
-                ty: at_most_one(Nested { name: S::Request::TYPE_NAME, fields: S::Request::fields }),
-            },
-            Field {
-                name: "response",
-                ty: at_most_one(Nested { name: S::Response::TYPE_NAME, fields: S::Response::fields }),
-            },
-        ]
+        let [request, response] = request_and_response::<S>(["request", "response"], at_most_one);
+        vec![Field { name: "info", ty: ServiceEventInfo::field_type() }, request, response]
     }
     Nested { name: S::TYPE_NAME, fields: parts::<S> }
+}
+
+/// Fields `names` holding the service's request and its response, each typed by `ty`.
+fn request_and_response<S: RosService>(names: [&'static str; 2], ty: impl Fn(Nested) -> FieldType) -> [Field; 2] {
+    [
+        Field { name: names[0], ty: ty(Nested { name: S::Request::TYPE_NAME, fields: S::Request::fields }) },
+        Field { name: names[1], ty: ty(Nested { name: S::Response::TYPE_NAME, fields: S::Response::fields }) },
+    ]
 }

@@ -13,12 +13,13 @@ use std::ops::Range;
 use imageproc::point::Point;
 use rayon::prelude::*;
 
-use super::segment::{PointSample, Segmentation};
+use super::{PointSample, Segmentation};
 use crate::grid::runs;
+use crate::ring::offset_vertices;
 
-/// One region: its component label, outline and holes (pixel centres, simplified).
+/// A region traced: its component label, outline and holes (pixel centres, simplified).
 #[derive(Clone, Debug, PartialEq)]
-pub struct Region {
+pub struct Outline {
     pub label: u32,
     pub outer: Vec<[f32; 2]>,
     pub holes: Vec<Vec<[f32; 2]>>,
@@ -33,14 +34,14 @@ pub struct Region {
 /// `simplify_px`, then moved half a pixel outwards (holes shrink) so that the polygon
 /// covers its pixels' squares rather than joining their centres. A region in more than
 /// one piece is outlined by its first piece in scan order.
-pub fn trace(seg: &Segmentation, simplify_px: f64, wanted: &[bool]) -> Vec<Region> {
+pub fn trace(seg: &Segmentation, simplify_px: f64, wanted: &[bool]) -> Vec<Outline> {
     let (w, h) = (seg.labels.width, seg.labels.height);
     seg.pixels
         .par_iter()
         .enumerate()
         .map(|(r, pixels)| {
             let label = r as u32 + 1;
-            let mut region = Region {
+            let mut region = Outline {
                 label,
                 outer: Vec::new(),
                 holes: Vec::new(),
@@ -50,7 +51,7 @@ pub fn trace(seg: &Segmentation, simplify_px: f64, wanted: &[bool]) -> Vec<Regio
             if pixels.is_empty() || !wanted[r] {
                 return region;
             }
-            let shape = Shape { labels: &seg.labels.data, width: w, height: h, label };
+            let shape = LabelMask { labels: &seg.labels.data, width: w, height: h, label };
             SCRATCH.with_borrow_mut(|Scratch { marks, points, simple }| {
                 marks.cover(w * h);
                 points.clear();
@@ -157,14 +158,14 @@ impl Marks {
 }
 
 /// The pixels labelled `label` in an image of labels.
-pub struct Shape<'a> {
+pub struct LabelMask<'a> {
     pub labels: &'a [u32],
     pub width: usize,
     pub height: usize,
     pub label: u32,
 }
 
-impl Shape<'_> {
+impl LabelMask<'_> {
     /// Whether pixel (x, y) is the shape's: false off the image.
     #[inline(always)]
     fn has(&self, x: i32, y: i32) -> bool {
@@ -201,7 +202,12 @@ const WEST: usize = 0;
 /// Abe's algorithm 1 finds them scanning the shape with a background margin around the
 /// image, their pixels appended to `points`. `marks` (covering the image) must be all
 /// clear, and is again on return.
-pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut Marks, points: &mut Vec<Point<i32>>) -> Vec<Border> {
+pub fn follow_borders(
+    shape: &LabelMask,
+    pixels: &[u32],
+    marks: &mut Marks,
+    points: &mut Vec<Point<i32>>,
+) -> Vec<Border> {
     // marks: 0 = a pixel no border has passed; n >= 2 = passed by border n - 2 (its
     // number in the paper); -n = passed by it with its east neighbour, background, seen.
     let w = shape.width;
@@ -275,7 +281,14 @@ pub fn follow_borders(shape: &Shape, pixels: &[u32], marks: &mut Marks, points: 
 /// Follows the border through `start`, whose neighbour towards `from` is background,
 /// marking its pixels with `number` (step 3 of the paper's algorithm 1) and appending them
 /// to `points`.
-fn follow(shape: &Shape, start: (i32, i32), from: usize, number: i32, marks: &mut Marks, points: &mut Vec<Point<i32>>) {
+fn follow(
+    shape: &LabelMask,
+    start: (i32, i32),
+    from: usize,
+    number: i32,
+    marks: &mut Marks,
+    points: &mut Vec<Point<i32>>,
+) {
     let width = shape.width;
     let step = |(x, y): (i32, i32), d: usize| (x + DIRECTIONS[d].0, y + DIRECTIONS[d].1);
     let at = |(x, y): (i32, i32)| y as usize * width + x as usize;
@@ -391,36 +404,6 @@ pub fn offset_ring(ring: &[[f32; 2]], d: f32) -> Vec<[f32; 2]> {
     offset_vertices(&pts, &vec![d as f64; pts.len()]).iter().map(|p| [p[0] as f32, p[1] as f32]).collect()
 }
 
-/// The ring with vertex i moved so that both its edges move `d[i]` away from the ring's
-/// inside (d < 0: towards it), whichever way the ring winds: along the bisector of the
-/// edges' normals, the shift capped at 2|d[i]| on sharp corners.
-pub fn offset_vertices(ring: &[[f64; 2]], d: &[f64]) -> Vec<[f64; 2]> {
-    let n = ring.len();
-    if n < 3 {
-        return ring.to_vec();
-    }
-    // Twice the signed area: its sign says which side of each edge is inside.
-    let area2: f64 = (0..n).map(|i| ring[i][0] * ring[(i + 1) % n][1] - ring[(i + 1) % n][0] * ring[i][1]).sum();
-    let side = if area2 > 0.0 { 1.0 } else { -1.0 };
-    // Outward unit normal of edge i (from vertex i to i + 1).
-    let normal = |i: usize| {
-        let (a, b) = (ring[i], ring[(i + 1) % n]);
-        let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
-        let len = ex.hypot(ey).max(1e-12);
-        [side * ey / len, -side * ex / len]
-    };
-    (0..n)
-        .map(|i| {
-            let (a, b) = (normal((i + n - 1) % n), normal(i));
-            let (sx, sy) = (a[0] + b[0], a[1] + b[1]);
-            let dot = (sx * a[0] + sy * a[1]).max(1e-6);
-            // Along the bisector, far enough that both edges move by d.
-            let scale = (d[i] / dot).clamp(-2.0 * d[i].abs(), 2.0 * d[i].abs());
-            [ring[i][0] + sx * scale, ring[i][1] + sy * scale]
-        })
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -502,7 +485,7 @@ mod tests {
             marks.cover(w * h);
             // Not empty: a border's range says where its pixels lie, whatever came before.
             let mut points = vec![Point::new(-1, -1)];
-            let shape_3 = Shape { labels: &labels, width: w, height: h, label: 3 };
+            let shape_3 = LabelMask { labels: &labels, width: w, height: h, label: 3 };
             let ours: Vec<Traced> = follow_borders(&shape_3, &pixels, &mut marks, &mut points)
                 .into_iter()
                 .map(|b| Traced { points: points[b.points].to_vec(), kind: b.kind, parent: b.parent })
