@@ -12,6 +12,7 @@ use polymap::config::PipelineConfig;
 use polymap::extract::cpu::components::{components_oracle, dense_from_roots};
 use polymap::extract::cpu::{self, classify, diffusion, gradient, hysteresis, morphology, normals, ransac};
 use polymap::extract::gpu::{DepthUpload, Gpu};
+use polymap::extract::params::{Stage, stages_run};
 use polymap::extract::regions::Segmentation;
 use polymap::extract::{Extraction, Grid, Images, MIN_REGION_PIXELS, depth_metres, extract_cpu, extract_gpu};
 use polymap::grid::label_components;
@@ -99,6 +100,23 @@ fn image_stages_agree_with_the_cpu_twin_on_every_mock_sequence() {
         assert_eq!(regions.pixels, want.pixels, "{name} frame {k}: region pixels");
     }
     eprintln!("worst smoothed depth difference {worst_depth:e} m");
+}
+
+#[test]
+fn both_twins_run_the_stages_in_the_one_order() {
+    let Some(device) = gpu() else { return };
+    let mut device = device.lock().unwrap_or_else(|e| e.into_inner());
+    let cfg = PipelineConfig::default();
+    let (name, seq, k) = &mock_frames(10)[0];
+    let frame = seq.depth(*k).unwrap();
+    let (cpu, cpu_order) = stages_run(|| extract_cpu(&frame, &seq.intrinsics, &cfg).unwrap());
+    let (gpu, gpu_order) = stages_run(|| extract_gpu(&mut device, &frame, &seq.intrinsics, &cfg, false).unwrap());
+    assert!(!cpu.polygons.polygons.is_empty() && !gpu.polygons.polygons.is_empty(), "{name} frame {k}");
+    assert_eq!(cpu_order, Stage::ORDER, "the CPU twin");
+    assert_eq!(gpu_order, Stage::ORDER, "the GPU twin");
+    // Nothing is noted outside a listening `stages_run`.
+    extract_cpu(&frame, &seq.intrinsics, &cfg).unwrap();
+    assert_eq!(stages_run(|| ()).1, []);
 }
 
 #[test]

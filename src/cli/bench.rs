@@ -26,10 +26,10 @@ pub fn bench(s: &Sequence, config: &Config, frames: usize, json: bool) -> Result
     let wall = started.elapsed().as_secs_f64();
     bar.finish_and_clear();
     let stages = crate::bench::stage_spreads(&times);
-    let device = match &extractor.engine {
-        extract::Engine::Gpu(g) if g.has_timestamps() => format!("{}, stages by GPU timestamps", g.describe()),
-        extract::Engine::Gpu(g) => format!("{}, no GPU timestamps: the stages' time is in readback", g.describe()),
-        extract::Engine::Cpu => format!(
+    let device = match &extractor.gpu {
+        Some(g) if g.has_timestamps() => format!("{}, stages by GPU timestamps", g.describe()),
+        Some(g) => format!("{}, no GPU timestamps: the stages' time is in readback", g.describe()),
+        None => format!(
             "CPU twin, {} threads, {} vectors",
             rayon::current_num_threads(),
             extract::cpu::simd::level().name()

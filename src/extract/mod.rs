@@ -85,16 +85,10 @@ fn check_frame(frame: &DepthFrame, intr: &Intrinsics) -> Result<(), ExtractError
     Ok(())
 }
 
-/// Which twin runs the stages, with the GPU's state. A single frame takes the twin as
-/// `Option<&mut Gpu>` (`extract_with`): None is the CPU twin.
-pub enum Engine {
-    Cpu,
-    Gpu(Box<gpu::Gpu>),
-}
-
 /// The extractor of a running pipeline: the backend chosen by config, and its state.
 pub struct Extractor {
-    pub engine: Engine,
+    /// The GPU twin's device and state; None: the CPU twin runs the stages.
+    pub gpu: Option<Box<gpu::Gpu>>,
     /// With `auto` on a software adapter: the first frame times both twins and keeps the faster.
     race_first_frame: bool,
     pub cfg: PipelineConfig,
@@ -106,38 +100,35 @@ impl Extractor {
     /// Opens the configured backend. `gpu` fails without a Vulkan adapter; `auto` falls
     /// back to the CPU twin then, and says so once in the log.
     pub fn new(cfg: &PipelineConfig) -> Result<Extractor, ExtractError> {
-        let (engine, race_first_frame) = match cfg.backend {
-            Backend::Cpu => (Engine::Cpu, false),
+        let (gpu, race_first_frame) = match cfg.backend {
+            Backend::Cpu => (None, false),
             Backend::Gpu => {
                 let gpu = gpu::Gpu::new()?;
                 tracing::info!("extraction on the GPU: {}", gpu.describe());
-                (Engine::Gpu(Box::new(gpu)), false)
+                (Some(Box::new(gpu)), false)
             }
             Backend::Auto => match gpu::Gpu::new() {
-                Ok(gpu) if gpu.is_software() => (Engine::Gpu(Box::new(gpu)), true),
+                Ok(gpu) if gpu.is_software() => (Some(Box::new(gpu)), true),
                 Ok(gpu) => {
                     tracing::info!("extraction on the GPU: {}", gpu.describe());
-                    (Engine::Gpu(Box::new(gpu)), false)
+                    (Some(Box::new(gpu)), false)
                 }
                 Err(e) => {
                     tracing::info!("extraction on the CPU twin: {e}");
-                    (Engine::Cpu, false)
+                    (None, false)
                 }
             },
         };
-        Ok(Extractor { engine, race_first_frame, cfg: cfg.clone(), keep_images: false })
+        Ok(Extractor { gpu, race_first_frame, cfg: cfg.clone(), keep_images: false })
     }
 
     /// The twin that runs the frames: `Backend::Gpu` or `Backend::Cpu`, never `Auto`.
     pub fn backend(&self) -> Backend {
-        match self.engine {
-            Engine::Cpu => Backend::Cpu,
-            Engine::Gpu(_) => Backend::Gpu,
-        }
+        if self.gpu.is_some() { Backend::Gpu } else { Backend::Cpu }
     }
 
     pub fn extract(&mut self, frame: &DepthFrame, intr: &Intrinsics) -> Result<Extraction, ExtractError> {
-        // On a pool thread, whichever engine: every parallel loop of the frame (the CPU
+        // On a pool thread, whichever twin: every parallel loop of the frame (the CPU
         // twin's stages, and regions, fits and polygons after the GPU's) then starts where
         // it is called, instead of each one waking a worker and putting this thread to
         // sleep (dozens of hand-offs a frame; docs/speed-history.md has their cost).
@@ -156,7 +147,7 @@ impl Extractor {
     fn extract_on_pool(&mut self, frame: &DepthFrame, intr: &Intrinsics) -> Result<Extraction, ExtractError> {
         let keep = self.keep_images;
         if std::mem::take(&mut self.race_first_frame)
-            && let Engine::Gpu(gpu) = &mut self.engine
+            && let Some(gpu) = &mut self.gpu
         {
             // The first GPU run compiles and allocates: time the second.
             extract_with(Some(gpu), frame, intr, &self.cfg, keep)?;
@@ -168,7 +159,7 @@ impl Extractor {
                     "extraction on the CPU twin: the only adapter, {name}, is software and slower ({gpu_ms:.1} ms vs {:.1} ms a frame)",
                     cpu.times.total
                 );
-                self.engine = Engine::Cpu;
+                self.gpu = None;
                 return Ok(cpu);
             }
             tracing::info!(
@@ -176,11 +167,7 @@ impl Extractor {
                 cpu.times.total
             );
         }
-        let gpu = match &mut self.engine {
-            Engine::Cpu => None,
-            Engine::Gpu(gpu) => Some(&mut **gpu),
-        };
-        extract_with(gpu, frame, intr, &self.cfg, keep)
+        extract_with(self.gpu.as_deref_mut(), frame, intr, &self.cfg, keep)
     }
 }
 
@@ -252,9 +239,11 @@ pub fn extract_with(
     let mut lap = stopwatch();
     let (images, seg, depth, mut gpu) = match gpu {
         None => {
+            params::ran(params::Stage::Metres);
             let depth = depth_metres(frame, intr)?;
             times.upload = lap();
             let images = cpu::image_stages(&depth, intr, cfg, &mut times, &mut lap);
+            params::ran(params::Stage::Regions);
             let seg = Segmentation::components(&images.boundary, MIN_REGION_PIXELS);
             (Some(images), seg, depth, None)
         }

@@ -11,6 +11,54 @@ use serde::Serialize;
 use crate::config::PipelineConfig;
 use crate::grid::Grid;
 
+/// The per-pixel stages from the raw depth to the regions. Each twin runs them in its own
+/// function (`cpu::image_stages` with `extract_with`, `Gpu::image_stages`), and says which
+/// it runs as it runs it (`ran`); tests/gpu.rs holds both to `Stage::ORDER`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    Metres,
+    Diffusion,
+    Normals,
+    Gradient,
+    Classify,
+    Hysteresis,
+    /// Depth steps, closing and sealing: the regions' boundary.
+    Boundary,
+    /// Connected components inside the boundary.
+    Regions,
+}
+
+impl Stage {
+    /// The order of the stages, written once.
+    pub const ORDER: [Stage; 8] = [
+        Stage::Metres,
+        Stage::Diffusion,
+        Stage::Normals,
+        Stage::Gradient,
+        Stage::Classify,
+        Stage::Hysteresis,
+        Stage::Boundary,
+        Stage::Regions,
+    ];
+}
+
+thread_local! {
+    /// The stages this thread ran, while `stages_run` listens.
+    static RAN: std::cell::RefCell<Option<Vec<Stage>>> = const { std::cell::RefCell::new(None) };
+}
+
+/// Notes that this thread's twin runs (or records) `stage` now.
+pub(crate) fn ran(stage: Stage) {
+    RAN.with_borrow_mut(|ran| ran.as_mut().map(|ran| ran.push(stage)));
+}
+
+/// `f`'s result and the stages it ran on this thread, in order.
+pub fn stages_run<R>(f: impl FnOnce() -> R) -> (R, Vec<Stage>) {
+    RAN.set(Some(Vec::new()));
+    let result = f();
+    (result, RAN.take().unwrap_or_default())
+}
+
 /// Rows a rayon task takes in the CPU twin's row-parallel loops (and the planes' writing).
 pub(crate) const ROWS_PER_TASK: usize = 8;
 

@@ -16,7 +16,7 @@ pub mod ransac;
 pub mod separable;
 pub mod simd;
 
-use super::params::{Images, StageTimes};
+use super::params::{Images, Stage, StageTimes, ran};
 use crate::config::PipelineConfig;
 use crate::grid::Grid;
 use crate::types::Intrinsics;
@@ -29,14 +29,20 @@ pub fn image_stages(
     times: &mut StageTimes,
     lap: &mut impl FnMut() -> f64,
 ) -> Images {
+    ran(Stage::Diffusion);
     let smoothed =
         diffusion::diffuse(depth, cfg.diffusion_time as f32, cfg.diffusion_steps, cfg.diffusion_kappa_m as f32);
     times.diffusion = lap();
+    ran(Stage::Normals);
     let normals = normals::normal_planes(&smoothed, intr, cfg.normal_kernel);
     times.normals = lap();
-    let class =
-        classify::classify(&gradient::gradient_of_planes(&normals), cfg.canny_low as f32, cfg.canny_high as f32);
+    ran(Stage::Gradient);
+    let gradient = gradient::gradient_of_planes(&normals);
+    ran(Stage::Classify);
+    let class = classify::classify(&gradient, cfg.canny_low as f32, cfg.canny_high as f32);
+    ran(Stage::Hysteresis);
     let canny = hysteresis::hysteresis(&class);
+    ran(Stage::Boundary);
     let boundary = boundary::boundary(
         &canny,
         &smoothed,

@@ -1,6 +1,7 @@
 //! A frame's per-pixel stages recorded into one submit, and its one readback.
 
 use super::*;
+use crate::extract::params::{Stage, ran};
 
 impl Gpu {
     /// Copies `outputs` one after another into the readback buffer (and, for a `timed`
@@ -80,14 +81,27 @@ impl Gpu {
             .collect();
         // Metres uploaded: an empty pass, so that every timestamp is written.
         let metres = [(self.metres.entry("main"), &g.metres, size)];
-        Self::pass(&mut encoder, set, 0, if matches!(depth, DepthUpload::Raw(_)) { &metres } else { &[] });
+        let raw = matches!(depth, DepthUpload::Raw(_));
+        if raw {
+            ran(Stage::Metres);
+        }
+        Self::pass(&mut encoder, set, 0, if raw { &metres } else { &[] });
+        ran(Stage::Diffusion);
         Self::pass(&mut encoder, set, 1, &steps);
+        ran(Stage::Normals);
         Self::pass(&mut encoder, set, 2, &[(self.normals.entry("main"), &g.normals, size)]);
-        let mut edges =
-            vec![(self.gradient.entry("main"), &g.gradient, size), (self.classify.entry("main"), &g.classify, size)];
+        // One timed pass for the edges' four stages.
+        let mut edges = Vec::new();
+        ran(Stage::Gradient);
+        edges.push((self.gradient.entry("main"), &g.gradient, size));
+        ran(Stage::Classify);
+        edges.push((self.classify.entry("main"), &g.classify, size));
+        ran(Stage::Hysteresis);
         edges.extend(self.hysteresis_dispatches(size));
+        ran(Stage::Boundary);
         edges.extend(self.boundary_dispatches(size));
         Self::pass(&mut encoder, set, 3, &edges);
+        ran(Stage::Regions);
         Self::pass(&mut encoder, set, 4, &self.components_dispatches(&g.regions, size));
 
         let mut outputs = vec![(&f.regions, n * 4)];
