@@ -10,7 +10,6 @@ use polymap::logs::{Log, LogKind, LogTopics};
 use polymap::mock::vins::MockVinsOptions;
 use polymap::sequence::Sequence;
 use polymap::synth::{self, SceneKind, SynthOptions};
-use polymap::{extract, replay};
 
 #[derive(Parser)]
 #[command(name = "polymap", version, about = "Real-time polygonal terrain mapping for legged robots", long_about = None)]
@@ -305,36 +304,7 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Extract { seq, frame, out, world, debug, config, backend } => {
             let config = load_config(config, backend)?;
-            let s = Sequence::open(&seq)?;
-            if frame >= s.len() {
-                bail!("--frame {frame}: {} has frames 0..{}", seq.display(), s.len());
-            }
-            let depth = s.depth(frame)?;
-            let mut extractor = extract::Extractor::new(&config.pipeline)?;
-            extractor.keep_images = debug.is_some();
-            let extraction = extractor.extract(&depth, &s.intrinsics)?;
-            let count = extraction.polygons.polygons.len();
-            tracing::info!("frame {frame}: {count} polygons in {:.1} ms", extraction.times.total);
-            if let Some(dir) = &debug {
-                extract::debug::write_stage_images(dir, &extraction, &s.intrinsics)?;
-                // Not on stdout: without --out, stdout carries the JSON alone.
-                tracing::info!("stage pictures in {}", dir.display());
-            }
-            let result = extraction.polygons;
-            let polygons: Vec<_> = if world {
-                result.polygons.iter().map(|p| p.transformed(&s.poses[frame].transform)).collect()
-            } else {
-                result.polygons
-            };
-            let json = serde_json::to_string_pretty(&serde_json::json!({
-                "frame": if world { "world" } else { "camera" },
-                "stamp_ns": result.stamp_ns,
-                "polygons": polygons,
-            }))?;
-            match out {
-                Some(path) => std::fs::write(&path, json).with_context(|| format!("writing {}", path.display()))?,
-                None => println!("{json}"),
-            }
+            cli::extract::extract_frame(&seq, frame, &config, world, debug.as_deref(), out.as_deref())?;
         }
         Command::Eval { seq, config, json, backend, debug, segmentation: true, tolerance, .. } => {
             if !(tolerance > 0.5 && tolerance <= 1.0) {
@@ -358,61 +328,7 @@ fn run(cli: Cli) -> Result<()> {
             if no_drift_filter {
                 config.map.drift_filter = false;
             }
-            if let Some(log) = Log::find(&seq)? {
-                let mut map = polymap::map::persist::initial_map(&config.map);
-                let bar = progress(0, "replay");
-                let r = polymap::logs::replay(&log, &topics.of(log.kind), &config, &mut map, |done, of| {
-                    bar.set_length(of);
-                    bar.set_position(done);
-                })?;
-                bar.finish_and_clear();
-                if r.mapped == 0 {
-                    bail!("{}: no image mapped: {r}", seq.display());
-                }
-                println!("{}: {r} -> {} map polygons; drift {:.1} mm", seq.display(), map.len(), map.drift.z * 1e3);
-                if let Some(path) = &out {
-                    replay::write_json(&mut map, path)?;
-                }
-                if let Some(path) = &render {
-                    polymap::map::render::top_down(&map.snapshot(), None)
-                        .save(path)
-                        .with_context(|| format!("writing {}", path.display()))?;
-                }
-                return Ok(());
-            }
-            let s = Sequence::open(&seq)?;
-            let mut map = polymap::map::persist::initial_map(&config.map);
-            let bar = progress(s.len() as u64, "replay");
-            replay::replay(&s, &config, &mut map, |_, _| bar.inc(1))?;
-            bar.finish_and_clear();
-            let c = map.counters;
-            println!(
-                "{}: {} frames -> {} map polygons ({} merges, {} cleared, {} rejected); drift {:.1} mm (sd {:.1} mm)",
-                seq.display(),
-                s.len(),
-                map.len(),
-                c.merged,
-                c.cleared,
-                c.rejected,
-                map.drift.z * 1e3,
-                map.drift.var.sqrt() * 1e3
-            );
-            if let Some(st) = map.stair() {
-                println!(
-                    "stair: {} steps, step height {:.1} mm, tread depth {}",
-                    st.steps,
-                    st.step_height * 1e3,
-                    st.tread_depth.map_or("-".into(), |d| format!("{:.1} mm", d * 1e3))
-                );
-            }
-            if let Some(path) = &out {
-                replay::write_json(&mut map, path)?;
-            }
-            if let Some(path) = &render {
-                polymap::map::render::top_down(&map.snapshot(), s.truth.as_ref())
-                    .save(path)
-                    .with_context(|| format!("writing {}", path.display()))?;
-            }
+            cli::replay::replay(&seq, |kind| topics.of(kind), &config, out.as_deref(), render.as_deref())?;
         }
         Command::Bench { seq, backend, frames, config, json, threads } => {
             if let Some(n) = threads {

@@ -1,9 +1,11 @@
-//! The command line's drivers: what `polymap eval`, `bench` and `inspect` do and print,
-//! in the library so that main.rs is only the argument parsing.
+//! The command line's drivers: what `polymap extract`, `replay`, `eval`, `bench` and
+//! `inspect` do and print, in the library so that main.rs is only the argument parsing.
 
 pub mod bench;
 pub mod eval;
+pub mod extract;
 pub mod inspect;
+pub mod replay;
 
 use indicatif::{ProgressBar, ProgressStyle};
 
