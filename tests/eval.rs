@@ -2,7 +2,7 @@
 //! REFERENCE.md as `polymap eval` computes them.
 
 use polymap::config::PipelineConfig;
-use polymap::eval::{min_visible_pixels, score_frame, summarise};
+use polymap::eval::{level_tilts, min_visible_pixels, score_frame, summarise, summarise_level};
 use polymap::extract::extract_cpu;
 use polymap::sequence::Sequence;
 
@@ -51,6 +51,34 @@ fn a_polygon_that_misses_its_tread_scores_zero() {
     let bad = score_frame(3, &moved, &seq.poses[3].transform, &seq.labels(3).unwrap(), truth, &seq.intrinsics);
     assert!(good.iter().all(|s| s.found) && !good.is_empty());
     assert!(bad.iter().all(|s| !s.found && s.iou < 0.2), "{bad:?}");
+}
+
+#[test]
+fn level_tilts_are_each_published_level_polygon_s_angle_from_level() {
+    // A frame's polygons turned about the world's x axis tilt from level by as much.
+    let seq = Sequence::open("mock_frames/straight_640").unwrap();
+    let out = extract_cpu(&seq.depth(3).unwrap(), &seq.intrinsics, &PipelineConfig::default()).unwrap().polygons;
+    let pose = seq.poses[3].transform;
+    let level = level_tilts(3, &out.polygons, &pose);
+    assert!(level.len() >= 3 && level.iter().all(|t| t.tilt_deg < 0.5 && t.area_m2 >= 0.02), "{level:?}");
+    for deg in [2.0f64, 30.0] {
+        // In the camera frame: taken to the world, turned there, brought back.
+        let turn = nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::x_axis(), deg.to_radians());
+        let turned = pose.inverse() * nalgebra::Isometry3::from_parts(Default::default(), turn) * pose;
+        let moved: Vec<_> = out.polygons.iter().map(|p| p.transformed(&turned)).collect();
+        let tilted = level_tilts(3, &moved, &pose);
+        if deg > 25.0 {
+            assert!(tilted.is_empty(), "{deg} deg off level is not level: {tilted:?}");
+            continue;
+        }
+        assert_eq!(tilted.len(), level.len());
+        for (t, l) in tilted.iter().zip(&level) {
+            assert!((t.tilt_deg - deg).abs() <= l.tilt_deg + 1e-6, "{t:?} against {l:?}");
+        }
+        let summary = summarise_level(&tilted);
+        assert_eq!(summary.polygons, level.len());
+        assert!(summary.worst.is_some_and(|w| w.tilt_deg >= summary.tilt_p99_deg && w.tilt_deg > 1.5));
+    }
 }
 
 /// The small-objects config on the real ABW range images with hand-made plane truth

@@ -18,11 +18,12 @@ pub fn evaluate(s: &Sequence, config: &Config, json: bool, debug: Option<&Path>)
     let rise = truth.stair.as_ref().map_or(f64::NAN, |st| st.rise);
     let mut extractor = extract::Extractor::new(&config.pipeline)?;
     let bar = progress(s.len() as u64, "eval");
-    let mut scores = Vec::new();
+    let (mut scores, mut level) = (Vec::new(), Vec::new());
     for k in 0..s.len() {
         let result = extractor.extract(&s.depth(k)?, &s.intrinsics)?.polygons;
         let labels = s.labels(k)?;
         scores.extend(eval::score_frame(k, &result.polygons, &s.poses[k].transform, &labels, truth, &s.intrinsics));
+        level.extend(eval::level_tilts(k, &result.polygons, &s.poses[k].transform));
         if let Some(dir) = debug {
             std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
             let path = dir.join(format!("{k:06}.png"));
@@ -34,8 +35,10 @@ pub fn evaluate(s: &Sequence, config: &Config, json: bool, debug: Option<&Path>)
     }
     bar.finish_and_clear();
     let summary = eval::summarise(&scores, rise);
+    let level = eval::summarise_level(&level);
     if json {
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "treads": scores, "summary": summary }))?);
+        let all = serde_json::json!({ "treads": scores, "summary": summary, "level": level });
+        println!("{}", serde_json::to_string_pretty(&all)?);
         return Ok(());
     }
     println!(
@@ -82,6 +85,18 @@ pub fn evaluate(s: &Sequence, config: &Config, json: bool, debug: Option<&Path>)
         m.step_error_mean_mm,
         m.step_error_std_mm,
         m.step_pairs
+    );
+    println!(
+        "level polygons (>= {} m2, within {} deg of level), every frame: {}; tilt mean {:.3} deg, p99 {:.3} deg, worst {}",
+        eval::LEVEL_MIN_AREA_M2,
+        eval::LEVEL_WITHIN_DEG,
+        level.polygons,
+        level.tilt_mean_deg,
+        level.tilt_p99_deg,
+        level.worst.map_or("-".into(), |w| format!(
+            "{:.3} deg (frame {}, polygon {}: {:.3} m2, {} px)",
+            w.tilt_deg, w.frame, w.polygon, w.area_m2, w.pixels
+        ))
     );
     Ok(())
 }

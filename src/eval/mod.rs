@@ -157,6 +157,54 @@ pub fn step_errors(scores: &[TreadScore], rise: f64) -> Vec<f64> {
     out
 }
 
+/// Published polygons within this of level, and at least `LEVEL_MIN_AREA_M2` large, are
+/// ground a planner may put a foot on: the steppable bar holds their tilt to 1 deg.
+pub const LEVEL_WITHIN_DEG: f64 = 25.0;
+pub const LEVEL_MIN_AREA_M2: f64 = 0.02;
+
+/// A published polygon near level, and how far it tilts from level: every level surface
+/// of the synthetic scenes is exactly level, so its tilt is its error.
+#[derive(Clone, Debug, Serialize)]
+pub struct LevelTilt {
+    pub frame: usize,
+    pub polygon: u32,
+    pub tilt_deg: f64,
+    pub area_m2: f64,
+    pub pixels: usize,
+}
+
+/// The level polygons of one frame (`polygons` in the camera frame, `t_world_camera` its pose).
+pub fn level_tilts(frame: usize, polygons: &[Polygon], t_world_camera: &Isometry3<f64>) -> Vec<LevelTilt> {
+    polygons
+        .iter()
+        .filter(|p| p.area >= LEVEL_MIN_AREA_M2)
+        .map(|p| {
+            let up = (t_world_camera.rotation * nalgebra::Vector3::from(p.normal)).z.abs().min(1.0);
+            LevelTilt { frame, polygon: p.id, tilt_deg: up.acos().to_degrees(), area_m2: p.area, pixels: p.pixel_count }
+        })
+        .filter(|t| t.tilt_deg <= LEVEL_WITHIN_DEG)
+        .collect()
+}
+
+/// The level polygons' tilts over a whole sequence: mean, 99th percentile and the worst one.
+#[derive(Clone, Debug, Serialize)]
+pub struct LevelSummary {
+    pub polygons: usize,
+    pub tilt_mean_deg: f64,
+    pub tilt_p99_deg: f64,
+    pub worst: Option<LevelTilt>,
+}
+
+pub fn summarise_level(tilts: &[LevelTilt]) -> LevelSummary {
+    let values: Vec<f64> = tilts.iter().map(|t| t.tilt_deg).collect();
+    LevelSummary {
+        polygons: tilts.len(),
+        tilt_mean_deg: mean_std(&values).0,
+        tilt_p99_deg: crate::stats::percentile(&values, 0.99),
+        worst: tilts.iter().max_by(|a, b| a.tilt_deg.total_cmp(&b.tilt_deg)).cloned(),
+    }
+}
+
 /// Mean and (population) standard deviation; (NaN, NaN) for no values.
 pub fn mean_std(values: &[f64]) -> (f64, f64) {
     let n = values.len() as f64;
