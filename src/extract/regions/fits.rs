@@ -122,6 +122,14 @@ fn extend_points_portable(pixels: &[u32], cloud: &Cloud, out: &mut Vec<[f32; 3]>
 /// gathered and read twice by the refit for nothing.
 pub(super) const MAX_FIT_POINTS: usize = 8192;
 
+/// The refit after growth takes the points within this many of the first fit's RMS of its
+/// plane (at most the inlier distance, at least `MIN_REFIT_BAND_SHARE` of it). Growth
+/// hands a region every border pixel within the inlier distance of its plane, and those
+/// include the first centimetre of the walls and risers it meets, all on one side of the
+/// plane: fitted with them, a whole tread tilted by a third of a degree.
+const REFIT_BAND_RMS: f32 = 3.0;
+const MIN_REFIT_BAND_SHARE: f32 = 0.1;
+
 /// A grown region of more pixels than this is refitted in parts of this many, a task
 /// each (`refit_parts`): the floor of a 640x480 frame, a hundred thousand pixels, is
 /// seven.
@@ -146,7 +154,8 @@ pub(super) fn refit_grown(
         .map(|r| {
             let Some(f) = fits[r].filter(|_| accepted[r]) else { return (None, PointSample::default()) };
             let parts = seg.point_parts(r, cloud, REFIT_PART_PIXELS);
-            let refit = cpu::ransac::refit_parts(&parts, f.normal_f32(), f.offset as f32, dist);
+            let band = (REFIT_BAND_RMS * f.rms as f32).clamp(dist * MIN_REFIT_BAND_SHARE, dist);
+            let refit = cpu::ransac::refit_parts(&parts, f.normal_f32(), f.offset as f32, band);
             (refit, PointSample::of_parts(&parts, MAX_SAMPLE_POINTS))
         })
         .collect();
