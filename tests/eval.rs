@@ -75,7 +75,7 @@ fn level_tilts_are_each_published_level_polygon_s_angle_from_level() {
         for (t, l) in tilted.iter().zip(&level) {
             assert!((t.tilt_deg - deg).abs() <= l.tilt_deg + 1e-6, "{t:?} against {l:?}");
         }
-        let summary = summarise_level(&tilted);
+        let summary = summarise_level(&tilted, &[]);
         assert_eq!(summary.polygons, level.len());
         assert!(summary.worst.is_some_and(|w| w.tilt_deg >= summary.tilt_p99_deg && w.tilt_deg > 1.5));
     }

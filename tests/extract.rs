@@ -1001,3 +1001,27 @@ fn a_strip_that_took_in_two_rows_of_the_riser_is_two_surfaces_and_a_clean_one_is
     assert!(mixed.angle_rad > 10.0 * mixed.sigma_rad, "far beyond the noise: {mixed:?}");
     assert!(fit.normal.y > -0.9998, "and its fit is tilted by over a degree: {:?}", fit.normal);
 }
+
+#[test]
+fn what_is_held_back_is_recorded_with_its_reason() {
+    use polymap::extract::HoldBack;
+    use polymap::extract::polygon::MAX_TILT_SIGMA_DEG;
+    // Two frames of the straight walk where a region's halves bend beyond the bar: held
+    // back, not published, and said why.
+    let seq = polymap::sequence::Sequence::open("mock_frames/straight_320").unwrap();
+    let cfg = PipelineConfig::default();
+    let mut not_one_plane = 0;
+    for k in [20, 28] {
+        let e = extract_cpu(&seq.depth(k).unwrap(), &seq.intrinsics, &cfg).unwrap();
+        for h in &e.stages.held_back {
+            match h.why {
+                HoldBack::TooSmall => assert!(h.area < cfg.min_polygon_area_m2, "{h:?}"),
+                HoldBack::TiltUnknown { sigma_deg } => assert!(sigma_deg > MAX_TILT_SIGMA_DEG, "{h:?}"),
+                HoldBack::NotOnePlane | HoldBack::NoPlane => assert!(h.area >= cfg.min_polygon_area_m2, "{h:?}"),
+            }
+            assert!(!e.polygons.polygons.iter().any(|p| p.normal == h.normal), "held back and published: {h:?}");
+            not_one_plane += usize::from(h.why == HoldBack::NotOnePlane && h.pixel_count > 500);
+        }
+    }
+    assert_eq!(not_one_plane, 2, "the two bent regions");
+}

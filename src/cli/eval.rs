@@ -18,12 +18,14 @@ pub fn evaluate(s: &Sequence, config: &Config, json: bool, debug: Option<&Path>)
     let rise = truth.stair.as_ref().map_or(f64::NAN, |st| st.rise);
     let mut extractor = extract::Extractor::new(&config.pipeline)?;
     let bar = progress(s.len() as u64, "eval");
-    let (mut scores, mut level) = (Vec::new(), Vec::new());
+    let (mut scores, mut level, mut held_back) = (Vec::new(), Vec::new(), Vec::new());
     for k in 0..s.len() {
-        let result = extractor.extract(&s.depth(k)?, &s.intrinsics)?.polygons;
+        let extraction = extractor.extract(&s.depth(k)?, &s.intrinsics)?;
+        let (result, pose) = (extraction.polygons, &s.poses[k].transform);
         let labels = s.labels(k)?;
-        scores.extend(eval::score_frame(k, &result.polygons, &s.poses[k].transform, &labels, truth, &s.intrinsics));
-        level.extend(eval::level_tilts(k, &result.polygons, &s.poses[k].transform));
+        scores.extend(eval::score_frame(k, &result.polygons, pose, &labels, truth, &s.intrinsics));
+        level.extend(eval::level_tilts(k, &result.polygons, pose));
+        held_back.extend(eval::level_held_back(&extraction.stages.held_back, pose));
         if let Some(dir) = debug {
             std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
             let path = dir.join(format!("{k:06}.png"));
@@ -35,7 +37,7 @@ pub fn evaluate(s: &Sequence, config: &Config, json: bool, debug: Option<&Path>)
     }
     bar.finish_and_clear();
     let summary = eval::summarise(&scores, rise);
-    let level = eval::summarise_level(&level);
+    let level = eval::summarise_level(&level, &held_back);
     if json {
         let all = serde_json::json!({ "treads": scores, "summary": summary, "level": level });
         println!("{}", serde_json::to_string_pretty(&all)?);
@@ -97,6 +99,14 @@ pub fn evaluate(s: &Sequence, config: &Config, json: bool, debug: Option<&Path>)
             "{:.3} deg (frame {}, polygon {}: {:.3} m2, {} px)",
             w.tilt_deg, w.frame, w.polygon, w.area_m2, w.pixels
         ))
+    );
+    let count = |c: eval::HeldBackCount| format!("{} ({:.2} m2)", c.polygons, c.area_m2);
+    println!(
+        "level polygons held back: normal not known to {} deg (1 sigma) {}, not one plane {}, no plane {}",
+        extract::polygon::MAX_TILT_SIGMA_DEG,
+        count(level.tilt_unknown),
+        count(level.not_one_plane),
+        count(level.no_plane)
     );
     Ok(())
 }

@@ -13,7 +13,7 @@ pub mod segmentation;
 use nalgebra::Isometry3;
 use serde::Serialize;
 
-use crate::extract::Polygon;
+use crate::extract::{HeldBack, HoldBack, Polygon};
 use crate::sequence::Truth;
 use crate::types::Intrinsics;
 
@@ -186,22 +186,50 @@ pub fn level_tilts(frame: usize, polygons: &[Polygon], t_world_camera: &Isometry
         .collect()
 }
 
-/// The level polygons' tilts over a whole sequence: mean, 99th percentile and the worst one.
+/// The level polygons of one frame that the extractor held back (`held` in the camera
+/// frame), as level and as large as the published ones `level_tilts` takes.
+pub fn level_held_back(held: &[HeldBack], t_world_camera: &Isometry3<f64>) -> Vec<HeldBack> {
+    let up = |h: &HeldBack| (t_world_camera.rotation * nalgebra::Vector3::from(h.normal)).z.abs().min(1.0);
+    (held.iter())
+        .filter(|h| h.area >= LEVEL_MIN_AREA_M2 && up(h).acos().to_degrees() <= LEVEL_WITHIN_DEG)
+        .cloned()
+        .collect()
+}
+
+/// How many level polygons were held back for a reason, and their area, m^2.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct HeldBackCount {
+    pub polygons: usize,
+    pub area_m2: f64,
+}
+
+/// The level polygons' tilts over a whole sequence: mean, 99th percentile and the worst
+/// one; and what the rule for publishing held back.
 #[derive(Clone, Debug, Serialize)]
 pub struct LevelSummary {
     pub polygons: usize,
     pub tilt_mean_deg: f64,
     pub tilt_p99_deg: f64,
     pub worst: Option<LevelTilt>,
+    pub tilt_unknown: HeldBackCount,
+    pub not_one_plane: HeldBackCount,
+    pub no_plane: HeldBackCount,
 }
 
-pub fn summarise_level(tilts: &[LevelTilt]) -> LevelSummary {
+pub fn summarise_level(tilts: &[LevelTilt], held_back: &[HeldBack]) -> LevelSummary {
     let values: Vec<f64> = tilts.iter().map(|t| t.tilt_deg).collect();
+    let count = |why: fn(&HoldBack) -> bool| {
+        let of: Vec<&HeldBack> = held_back.iter().filter(|h| why(&h.why)).collect();
+        HeldBackCount { polygons: of.len(), area_m2: of.iter().fold(0.0, |sum, h| sum + h.area) }
+    };
     LevelSummary {
         polygons: tilts.len(),
         tilt_mean_deg: mean_std(&values).0,
         tilt_p99_deg: crate::stats::percentile(&values, 0.99),
         worst: tilts.iter().max_by(|a, b| a.tilt_deg.total_cmp(&b.tilt_deg)).cloned(),
+        tilt_unknown: count(|w| matches!(w, HoldBack::TiltUnknown { .. })),
+        not_one_plane: count(|w| matches!(w, HoldBack::NotOnePlane)),
+        no_plane: count(|w| matches!(w, HoldBack::NoPlane)),
     }
 }
 

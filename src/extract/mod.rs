@@ -26,7 +26,7 @@ use crate::types::{DepthFrame, Intrinsics};
 use cloud::Cloud;
 use cpu::ransac::{PlaneFit, PointBatch};
 pub use params::{Images, MIN_REGION_PIXELS, StageTimes};
-pub use polygon::{FramePolygons, Polygon, VertexKind, build_polygons};
+pub use polygon::{FramePolygons, HeldBack, HoldBack, Polygon, VertexKind, build_polygons};
 use regions::{Outline, Segmentation, segment_and_fit};
 
 /// Why a frame could not be processed.
@@ -59,6 +59,8 @@ pub struct Stages {
     pub labels: Grid<u32>,
     pub regions: Vec<Outline>,
     pub fits: Vec<Option<PlaneFit>>,
+    /// The polygons outlined but not published, and why.
+    pub held_back: Vec<HeldBack>,
 }
 
 /// Depth units to metres (0 stays invalid), checking the frame against the intrinsics.
@@ -272,9 +274,9 @@ pub fn extract_with(
         Some(gpu) => Ok(cpu::ransac::fits_from_scores(batch, &gpu.score_hypotheses(batch, hyp, dist)?, hyp, dist)),
     };
     let (seg, regions, fits, creases) = segment_and_fit(seg, &cloud, cfg, fit, &mut times, &mut lap)?;
-    let polygons = build_polygons(&regions, &fits, &seg, &creases, &depth, intr, cfg);
+    let (polygons, held_back) = build_polygons(&regions, &fits, &seg, &creases, &depth, intr, cfg);
     times.polygons = lap();
     times.total = t0.elapsed().as_secs_f64() * 1e3;
-    let stages = Stages { images, labels: seg.labels, regions, fits };
+    let stages = Stages { images, labels: seg.labels, regions, fits, held_back };
     Ok(Extraction { polygons: FramePolygons { stamp_ns: frame.stamp_ns, polygons }, depth, stages, times })
 }

@@ -106,6 +106,29 @@ impl Polygon {
     }
 }
 
+/// Why a polygon was held back rather than published.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HoldBack {
+    /// Smaller than `min_polygon_area_m2` once outlined.
+    TooSmall,
+    /// Its inliers do not fix a plane (too few, or on a line).
+    NoPlane,
+    /// Its normal's standard deviation (worst axis) is over `MAX_TILT_SIGMA_DEG`.
+    TiltUnknown { sigma_deg: f64 },
+    /// Its two halves bend by more than `MAX_HALVES_BEND_DEG` (and their noise).
+    NotOnePlane,
+}
+
+/// A polygon held back: what it would have been, and why it was not published.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HeldBack {
+    pub normal: [f64; 3],
+    pub area: f64,
+    pub pixel_count: usize,
+    pub why: HoldBack,
+}
+
 /// A frame's polygons.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FramePolygons {
@@ -115,7 +138,8 @@ pub struct FramePolygons {
 
 /// Polygons from regions and their plane fits: keep well-supported fits, ray cast the
 /// pixel outlines onto the planes, cut them where the planes of the neighbours they meet
-/// along a crease (`creases`) bound them, drop what is smaller than the minimum area.
+/// along a crease (`creases`) bound them, hold back what is smaller than the minimum area
+/// or whose plane is not known well enough (returned beside them, with the reason).
 pub fn build_polygons(
     regions: &[Outline],
     fits: &[Option<PlaneFit>],
@@ -124,7 +148,7 @@ pub fn build_polygons(
     depth: &Grid<f32>,
     intr: &Intrinsics,
     cfg: &PipelineConfig,
-) -> Vec<Polygon> {
+) -> (Vec<Polygon>, Vec<HeldBack>) {
     let mut out = Vec::new();
     // Each polygon's region's sample of points.
     let mut samples = Vec::new();
@@ -201,44 +225,38 @@ pub fn build_polygons(
     // Kept: big enough, and a plane its inliers fix well (not all on a line, not a
     // normal too uncertain to stand on, not two surfaces fitted as one). A plane that
     // fails is held back, not refitted: its pixels do not hold a better one.
-    let keep: Vec<bool> = out
+    let verdicts: Vec<Result<(), HoldBack>> = out
         .par_iter_mut()
         .zip(plane_fits.par_iter())
         .zip(samples.par_iter())
         .map(|((p, fit), sample)| {
             if p.area < cfg.min_polygon_area_m2 {
-                return false;
+                return Err(HoldBack::TooSmall);
             }
             let dist = cfg.ransac_inlier_distance_m;
-            match plane_uncertainty(&sample.points, sample.stride, fit, dist) {
-                Some((u, _)) if u.tilt_sigma_rad() > MAX_TILT_SIGMA_DEG.to_radians() => {
-                    tracing::debug!(
-                        "polygon of {} px held back: its normal is known to {:.2} deg only",
-                        p.pixel_count,
-                        u.tilt_sigma_rad().to_degrees()
-                    );
-                    false
+            let Some((u, cut)) = plane_uncertainty(&sample.points, sample.stride, fit, dist) else {
+                return Err(HoldBack::NoPlane);
+            };
+            if u.tilt_sigma_rad() > MAX_TILT_SIGMA_DEG.to_radians() {
+                return Err(HoldBack::TiltUnknown { sigma_deg: u.tilt_sigma_rad().to_degrees() });
+            }
+            match halves_agreement(&sample.points, sample.stride, fit, dist, &cut) {
+                Some(h) if h.one_surface(MAX_HALVES_BEND_DEG.to_radians()) => {
+                    p.uncertainty = u;
+                    Ok(())
                 }
-                Some((u, cut)) => match halves_agreement(&sample.points, sample.stride, fit, dist, &cut) {
-                    Some(h) if h.one_surface(MAX_HALVES_BEND_DEG.to_radians()) => {
-                        p.uncertainty = u;
-                        true
-                    }
-                    h => {
-                        tracing::debug!(
-                            "polygon of {} px held back: its halves are not one plane ({h:?})",
-                            p.pixel_count
-                        );
-                        false
-                    }
-                },
-                None => {
-                    tracing::debug!("polygon of {} px: its inliers do not fix a plane", p.pixel_count);
-                    false
-                }
+                _ => Err(HoldBack::NotOnePlane),
             }
         })
         .collect();
+    let held_back: Vec<HeldBack> = (out.iter().zip(&verdicts))
+        .filter_map(|(p, v)| v.err().map(|why| (p, why)))
+        .map(|(p, why)| HeldBack { normal: p.normal, area: p.area, pixel_count: p.pixel_count, why })
+        .collect();
+    for h in held_back.iter().filter(|h| h.why != HoldBack::TooSmall) {
+        tracing::debug!("polygon of {} px, {:.3} m2 held back: {:?}", h.pixel_count, h.area, h.why);
+    }
+    let keep: Vec<bool> = verdicts.iter().map(Result::is_ok).collect();
     // Ids in the order kept; cuts name their neighbour by its new id.
     let mut next = 0;
     let new_id: Vec<Option<u32>> = keep
@@ -260,7 +278,7 @@ pub fn build_polygons(
             }
         }
     }
-    out
+    (out, held_back)
 }
 
 /// A polygon whose normal has a larger standard deviation (worst axis) is held back:
