@@ -257,58 +257,25 @@ pub struct ShaderFile {
 
 use Access::{Read, ReadWrite, Uniform};
 
-pub const METRES: ShaderFile = ShaderFile {
-    name: "metres",
-    source: include_str!("../../shaders/metres.wgsl"),
-    bindings: &[Uniform, Read, ReadWrite],
-};
-pub const DIFFUSION: ShaderFile = ShaderFile {
-    name: "diffusion",
-    source: include_str!("../../shaders/diffusion.wgsl"),
-    bindings: &[Uniform, Read, ReadWrite],
-};
-pub const NORMALS: ShaderFile = ShaderFile {
-    name: "normals",
-    source: include_str!("../../shaders/normals.wgsl"),
-    bindings: &[Uniform, Read, Read, ReadWrite],
-};
-pub const GRADIENT: ShaderFile = ShaderFile {
-    name: "gradient",
-    source: include_str!("../../shaders/gradient.wgsl"),
-    bindings: &[Uniform, Read, ReadWrite, ReadWrite],
-};
-pub const CLASSIFY: ShaderFile = ShaderFile {
-    name: "classify",
-    source: include_str!("../../shaders/classify.wgsl"),
-    bindings: &[Uniform, Read, Read, ReadWrite],
-};
-pub const COMPONENTS: ShaderFile = ShaderFile {
-    name: "components",
-    source: include_str!("../../shaders/components.wgsl"),
-    bindings: &[Uniform, Read, ReadWrite, ReadWrite],
-};
-pub const HYSTERESIS: ShaderFile = ShaderFile {
-    name: "hysteresis",
-    source: include_str!("../../shaders/hysteresis.wgsl"),
-    bindings: &[Uniform, Read, Read, ReadWrite, ReadWrite],
-};
-pub const MORPHOLOGY: ShaderFile = ShaderFile {
-    name: "morphology",
-    source: include_str!("../../shaders/morphology.wgsl"),
-    bindings: &[Uniform, Read, ReadWrite],
-};
-pub const BOUNDARY: ShaderFile = ShaderFile {
-    name: "boundary",
-    source: include_str!("../../shaders/boundary.wgsl"),
-    bindings: &[Uniform, Read, Read, Read, Read, Read, ReadWrite],
-};
-pub const RANSAC: ShaderFile = ShaderFile {
-    name: "ransac",
-    source: include_str!("../../shaders/ransac.wgsl"),
-    bindings: &[Uniform, Read, Read, Read, ReadWrite],
-};
+/// A shader file of shaders/ by its name (the file is the name's), its bindings in order.
+macro_rules! shader_file {
+    ($name:literal, [$($access:ident),*]) => {
+        ShaderFile { name: $name, source: include_str!(concat!("../../shaders/", $name, ".wgsl")), bindings: &[$($access),*] }
+    };
+}
 
-/// Every shader file, for the layout test.
+pub const METRES: ShaderFile = shader_file!("metres", [Uniform, Read, ReadWrite]);
+pub const DIFFUSION: ShaderFile = shader_file!("diffusion", [Uniform, Read, ReadWrite]);
+pub const NORMALS: ShaderFile = shader_file!("normals", [Uniform, Read, Read, ReadWrite]);
+pub const GRADIENT: ShaderFile = shader_file!("gradient", [Uniform, Read, ReadWrite, ReadWrite]);
+pub const CLASSIFY: ShaderFile = shader_file!("classify", [Uniform, Read, Read, ReadWrite]);
+pub const COMPONENTS: ShaderFile = shader_file!("components", [Uniform, Read, ReadWrite, ReadWrite]);
+pub const HYSTERESIS: ShaderFile = shader_file!("hysteresis", [Uniform, Read, Read, ReadWrite, ReadWrite]);
+pub const MORPHOLOGY: ShaderFile = shader_file!("morphology", [Uniform, Read, ReadWrite]);
+pub const BOUNDARY: ShaderFile = shader_file!("boundary", [Uniform, Read, Read, Read, Read, Read, ReadWrite]);
+pub const RANSAC: ShaderFile = shader_file!("ransac", [Uniform, Read, Read, Read, ReadWrite]);
+
+/// Every shader file, for the tests that parse and validate them all.
 pub const SHADERS: [&ShaderFile; 10] =
     [&METRES, &DIFFUSION, &NORMALS, &GRADIENT, &CLASSIFY, &COMPONENTS, &HYSTERESIS, &MORPHOLOGY, &BOUNDARY, &RANSAC];
 
