@@ -173,14 +173,19 @@ pub struct LevelTilt {
     pub pixels: usize,
 }
 
+/// The angle of a camera-frame normal from the world's vertical, either way up, degrees.
+fn tilt_from_level_deg(normal: [f64; 3], t_world_camera: &Isometry3<f64>) -> f64 {
+    (t_world_camera.rotation * nalgebra::Vector3::from(normal)).z.abs().min(1.0).acos().to_degrees()
+}
+
 /// The level polygons of one frame (`polygons` in the camera frame, `t_world_camera` its pose).
 pub fn level_tilts(frame: usize, polygons: &[Polygon], t_world_camera: &Isometry3<f64>) -> Vec<LevelTilt> {
     polygons
         .iter()
         .filter(|p| p.area >= LEVEL_MIN_AREA_M2)
         .map(|p| {
-            let up = (t_world_camera.rotation * nalgebra::Vector3::from(p.normal)).z.abs().min(1.0);
-            LevelTilt { frame, polygon: p.id, tilt_deg: up.acos().to_degrees(), area_m2: p.area, pixels: p.pixel_count }
+            let tilt_deg = tilt_from_level_deg(p.normal, t_world_camera);
+            LevelTilt { frame, polygon: p.id, tilt_deg, area_m2: p.area, pixels: p.pixel_count }
         })
         .filter(|t| t.tilt_deg <= LEVEL_WITHIN_DEG)
         .collect()
@@ -189,9 +194,8 @@ pub fn level_tilts(frame: usize, polygons: &[Polygon], t_world_camera: &Isometry
 /// The level polygons of one frame that the extractor held back (`held` in the camera
 /// frame), as level and as large as the published ones `level_tilts` takes.
 pub fn level_held_back(held: &[HeldBack], t_world_camera: &Isometry3<f64>) -> Vec<HeldBack> {
-    let up = |h: &HeldBack| (t_world_camera.rotation * nalgebra::Vector3::from(h.normal)).z.abs().min(1.0);
     (held.iter())
-        .filter(|h| h.area >= LEVEL_MIN_AREA_M2 && up(h).acos().to_degrees() <= LEVEL_WITHIN_DEG)
+        .filter(|h| h.area >= LEVEL_MIN_AREA_M2 && tilt_from_level_deg(h.normal, t_world_camera) <= LEVEL_WITHIN_DEG)
         .cloned()
         .collect()
 }
