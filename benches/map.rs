@@ -39,6 +39,7 @@ fn seen(i: usize, t_camera_world: &Isometry3<f64>) -> Polygon {
         inlier_ratio: 1.0,
         rms: 0.002,
         uncertainty: Default::default(),
+        footing: polymap::extract::Footing::Steppable,
     };
     world.transformed(t_camera_world)
 }

@@ -125,6 +125,8 @@ fn small_map() -> MapSnapshot {
             observations: 2,
             step: Some(id as u32),
             plane_covariance: [0.0; 16],
+            footing: crate::extract::Footing::Steppable,
+            pixels: 0,
         }
     };
     MapSnapshot {

@@ -580,6 +580,7 @@ fn a_polygon_is_cut_at_a_neighbour_plane_that_meets_it_and_bounds_its_points_and
         inlier_ratio: 1.0,
         rms: 0.0,
         uncertainty: Default::default(),
+        footing: polymap::extract::Footing::Steppable,
     };
     let grid = |x0: f32, x1: f32, f: &dyn Fn(f32, f32) -> [f32; 3]| -> Vec<[f32; 3]> {
         (0..=20)
@@ -1005,7 +1006,6 @@ fn a_strip_that_took_in_two_rows_of_the_riser_is_two_surfaces_and_a_clean_one_is
 #[test]
 fn what_is_held_back_is_recorded_with_its_reason() {
     use polymap::extract::HoldBack;
-    use polymap::extract::polygon::MAX_TILT_SIGMA_DEG;
     // Two frames of the straight walk where a region's halves bend beyond the bar: held
     // back, not published, and said why.
     let seq = polymap::sequence::Sequence::open("mock_frames/straight_320").unwrap();
@@ -1016,7 +1016,6 @@ fn what_is_held_back_is_recorded_with_its_reason() {
         for h in &e.stages.held_back {
             match h.why {
                 HoldBack::TooSmall => assert!(h.area < cfg.min_polygon_area_m2, "{h:?}"),
-                HoldBack::TiltUnknown { sigma_deg } => assert!(sigma_deg > MAX_TILT_SIGMA_DEG, "{h:?}"),
                 HoldBack::NotOnePlane | HoldBack::NoPlane => assert!(h.area >= cfg.min_polygon_area_m2, "{h:?}"),
             }
             assert!(!e.polygons.polygons.iter().any(|p| p.normal == h.normal), "held back and published: {h:?}");

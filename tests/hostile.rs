@@ -177,6 +177,8 @@ fn snapshot_with(boundary: Vec<[f64; 3]>) -> MapSnapshot {
             observations: 3,
             step: Some(1),
             plane_covariance: [0.0; 16],
+            footing: polymap::extract::Footing::Steppable,
+            pixels: 0,
         }],
     }
 }

@@ -4,7 +4,7 @@
 use geo::{Area, BooleanOps, Coord, LineString, Polygon as Shape};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use polymap::config::MapConfig;
-use polymap::extract::uncertainty::PlaneUncertainty;
+use polymap::extract::uncertainty::{Footing, PlaneUncertainty, footing};
 use polymap::extract::{Grid, Polygon, VertexKind};
 use polymap::map::convex::convex_pieces;
 use polymap::map::drift::DriftFilter;
@@ -40,6 +40,7 @@ fn seen(xy: &[[f64; 2]], z: f64, pose: &Isometry3<f64>) -> Polygon {
         inlier_ratio: 1.0,
         rms: 0.001,
         uncertainty: Default::default(),
+        footing: Footing::Steppable,
     };
     world.transformed(&pose.inverse())
 }
@@ -245,6 +246,7 @@ fn outlines_are_pulled_in_by_what_their_vertices_lie_on_and_not_at_all_along_a_c
         inlier_ratio: 1.0,
         rms: 0.001,
         uncertainty: Default::default(),
+        footing: polymap::extract::Footing::Steppable,
     }
     .transformed(&pose.inverse());
     let back_edge_kept = |back: VertexKind| {
@@ -402,6 +404,62 @@ fn tread_known_to(z: f64, sigma_m: f64, pose: &Isometry3<f64>) -> Polygon {
     tread
 }
 
+/// A tread over x 0..0.8, y -0.5..0.5 at height 0.2 seen by `pixels` pixels, its tilt known
+/// to `sigma_deg` along each axis, judged by the footing rule as the extractor judges it.
+fn tread_tilt_known_to(sigma_deg: f64, pixels: usize, pose: &Isometry3<f64>) -> Polygon {
+    let mut tread = seen(&rect(0.0, -0.5, 0.8, 0.5), 0.2, pose);
+    let s = sigma_deg.to_radians();
+    let world = PlaneUncertainty {
+        centre: [0.4, 0.0, 0.2],
+        axes: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        cov: [[s * s, 0.0, 0.0], [0.0, s * s, 0.0], [0.0, 0.0, 1e-6]],
+    };
+    tread.uncertainty = world.moved(
+        |v| (pose.inverse().rotation * Vector3::from(v)).into(),
+        |v| (pose.inverse() * Point3::from(v)).coords.into(),
+    );
+    tread.pixel_count = pixels;
+    tread.footing = footing(&tread.uncertainty, pixels);
+    tread
+}
+
+#[test]
+fn a_map_polygon_becomes_steppable_as_observations_shrink_its_covariance() {
+    use polymap::map::foothold::foothold;
+    let (pose, intr) = camera();
+    let on_it = [0.4, 0.0, 0.2];
+    // Each frame knows its tilt to 0.6 deg (1.18 deg at 95 %): over the bar, alone.
+    let tread = tread_tilt_known_to(0.6, 1000, &pose);
+    assert_eq!(tread.footing, Footing::TiltUnknown);
+    let mut map = PolygonMap::new(&MapConfig::default());
+    map.update(std::slice::from_ref(&tread), &pose, &intr, None);
+    let snap = map.snapshot();
+    assert_eq!(snap.polygons[0].footing, Footing::TiltUnknown);
+    assert!(foothold(&snap, on_it).is_none(), "no foothold on a plane not known");
+    // Two such views: 0.42 deg, 0.83 at 95 %.
+    map.update(std::slice::from_ref(&tread), &pose, &intr, None);
+    let snap = map.snapshot();
+    assert_eq!((snap.polygons.len(), snap.polygons[0].observations), (1, 2));
+    assert_eq!(snap.polygons[0].footing, Footing::Steppable);
+    assert!(foothold(&snap, on_it).is_some_and(|f| f.distance == 0.0), "a foothold once it is known");
+
+    // Well known but small in every frame: not steppable however often seen, until one
+    // frame sees it whole.
+    let (small, whole) = (tread_tilt_known_to(0.1, 150, &pose), tread_tilt_known_to(0.1, 400, &pose));
+    let mut map = PolygonMap::new(&MapConfig::default());
+    for _ in 0..5 {
+        map.update(std::slice::from_ref(&small), &pose, &intr, None);
+    }
+    let snap = map.snapshot();
+    assert_eq!((snap.polygons[0].footing, snap.polygons[0].pixels), (Footing::FewPixels, 150));
+    map.update(std::slice::from_ref(&whole), &pose, &intr, None);
+    let snap = map.snapshot();
+    assert_eq!((snap.polygons[0].footing, snap.polygons[0].pixels), (Footing::Steppable, 400));
+    // A snapshot keeps what made it steppable.
+    let reloaded = PolygonMap::from_snapshot(&MapConfig::default(), &snap).unwrap().snapshot();
+    assert_eq!((reloaded.polygons[0].footing, reloaded.polygons[0].pixels), (Footing::Steppable, 400));
+}
+
 #[test]
 fn the_map_s_plane_weighs_each_observation_by_how_well_its_plane_is_known() {
     let (pose, intr) = camera();
@@ -516,6 +574,7 @@ fn labels_name_a_staircase() {
         inlier_ratio: 1.0,
         rms: 0.001,
         uncertainty: Default::default(),
+        footing: polymap::extract::Footing::Steppable,
     };
     polys.push(riser.transformed(&pose.inverse()));
     map.update(&polys, &pose, &intr, None);

@@ -156,16 +156,16 @@ fn polymap_msgs_hashes_stay_what_they_are() {
     // messages no longer match. Update polymap_msgs/ with it (the Python peer in
     // tests/ros2_peer.rs recomputes these from the .msg and .srv files).
     let pinned = [
-        (message_hash::<msg::Polygon>(), "RIHS01_df36e36d56412d7a6a477b8e9030ee7498a15b6dab366d57c763daf03cd65951"),
+        (message_hash::<msg::Polygon>(), "RIHS01_0d6e3a296c10c1a1e93a54a657dda2c0505c13168ac1731ecec1cab26e29c791"),
         (
             message_hash::<msg::FramePolygons>(),
-            "RIHS01_4ffe8a9ffffc4d7f5b91780ae247afe2192da5c52134f5c05cc14ba0191cddf6",
+            "RIHS01_db2a0223fd51c6b7a2a6bc69f39c3cd93425c16cd965b5904b6ae6691c94c1b4",
         ),
-        (message_hash::<msg::MapUpdate>(), "RIHS01_18d08c93b6eabd991b803d88f0a2ec613f083e7ca8012d7cc545d692bb1d4c8f"),
-        (message_hash::<msg::Map>(), "RIHS01_3acdd9c4a5d2941788b62de48504706dccf141fc05616d722cc642dd625667df"),
+        (message_hash::<msg::MapUpdate>(), "RIHS01_acb4e7b5687d7d674f6ed33e672ad088e44e048c32e25d16924b340c755ac265"),
+        (message_hash::<msg::Map>(), "RIHS01_ee0adf25b9639d61e82a4254635b6c1168770a5843090ed2756f069e0c4d1b10"),
         (message_hash::<msg::Foothold>(), "RIHS01_d26115d96a054f501d9035484e44efd87a0dabf66fd8dc041d707ec4e59b8d6a"),
         (message_hash::<msg::Status>(), "RIHS01_60bd89eec0cc25e5fd6f0095ab83e8ed4b63c59a62a5a806ea4970c9aa32b5db"),
-        (service_hash::<msg::GetMap>(), "RIHS01_a71f5084f76aff119474b636e68d8598fd56d7844b6ec6c47cc7b8585a5d3f0e"),
+        (service_hash::<msg::GetMap>(), "RIHS01_751393063164b025f4401ffccef7f209848155f0bee95456a3ea9b92e97d8fe2"),
         (service_hash::<msg::GetFoothold>(), "RIHS01_160e108c4c57519c6ee265867964cd138069183f4f278b046e095327834391b8"),
         (message_hash::<msg::Region>(), "RIHS01_02f36fb3a034933b83025e74605cb9f8bd8c509fa461641830b6258de7406ae7"),
     ];

@@ -151,6 +151,10 @@ fn a_ros_2_peer_on_rmw_zenoh_sees_polymap_s_topics_graph_and_services_and_feeds_
 
     // Services: answers, with attachments naming the request.
     assert!(v["map"]["treads"].as_u64().unwrap() >= 3, "{}", v["map"]);
+    // Each polygon says whether a foot may trust it, consistently, and the walk's treads are
+    // steppable.
+    assert_eq!(v["map"]["footing_consistent"], true, "{}", v["map"]);
+    assert!(v["map"]["steppable_treads"].as_u64().unwrap() >= 3, "{}", v["map"]);
     assert_eq!(v["map_reply"], serde_json::json!({"attachment": true, "echoes_seq": true, "echoes_gid": true}));
     assert_eq!(v["foothold"], serde_json::json!({"found": true, "contains": true, "label": 2, "echoes": true}));
 

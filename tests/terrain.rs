@@ -130,4 +130,21 @@ fn the_terrain_grid_holds_each_surface_at_its_plane_height_and_nan_off_every_sur
         checked += 1;
     }
     assert!(checked >= 5, "{checked} true treads found in the grid");
+
+    // Every tread of the replayed walk is steppable; one marked otherwise leaves the
+    // regions (a foot may not go there) but not the grid (the terrain's shape stays).
+    assert!(treads.iter().all(|p| p.footing.is_steppable()), "every mapped tread is steppable");
+    let mut doubtful = snapshot.clone();
+    let unsure = doubtful.polygons.iter_mut().find(|p| p.label == Label::Tread && p.id == treads[2].id).unwrap();
+    unsure.footing = polymap::extract::Footing::TiltUnknown;
+    let without = planar_terrain(&doubtful, robot, cfg, 0, "map");
+    assert_eq!(without.planar_regions.len(), terrain.planar_regions.len() - 1);
+    let gone = treads[2].centroid[2];
+    let at_its_height = |t: &polymap::ros2::msg::PlanarTerrain| {
+        t.planar_regions.iter().filter(|r| (r.plane_parameters.position.z - gone).abs() < 0.02).count()
+    };
+    assert_eq!(at_its_height(&without), at_its_height(&terrain) - 1, "its region is the one gone");
+    let bits =
+        |t: &polymap::ros2::msg::PlanarTerrain| t.gridmap.data[0].data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&without), bits(&terrain), "the elevation keeps it");
 }

@@ -88,25 +88,45 @@ pub fn evaluate(s: &Sequence, config: &Config, json: bool, debug: Option<&Path>)
         m.step_error_std_mm,
         m.step_pairs
     );
+    let worst = |w: Option<eval::LevelTilt>| {
+        w.map_or("-".into(), |w| {
+            format!(
+                "{:.3} deg (frame {}, polygon {}: {:.3} m2, {} px)",
+                w.tilt_deg, w.frame, w.polygon, w.area_m2, w.pixels
+            )
+        })
+    };
+    for (which, t) in [("published", &level.all), ("steppable", &level.steppable)] {
+        println!(
+            "level polygons {which} (>= {} m2, within {} deg of level), every frame: {}; tilt mean {:.3} deg, p99 {:.3} deg, worst {}",
+            eval::LEVEL_MIN_AREA_M2,
+            eval::LEVEL_WITHIN_DEG,
+            t.polygons,
+            t.tilt_mean_deg,
+            t.tilt_p99_deg,
+            worst(t.worst.clone())
+        );
+    }
+    let count = |c: eval::PolygonCount| format!("{} ({:.2} m2)", c.polygons, c.area_m2);
     println!(
-        "level polygons (>= {} m2, within {} deg of level), every frame: {}; tilt mean {:.3} deg, p99 {:.3} deg, worst {}",
-        eval::LEVEL_MIN_AREA_M2,
-        eval::LEVEL_WITHIN_DEG,
-        level.polygons,
-        level.tilt_mean_deg,
-        level.tilt_p99_deg,
-        level.worst.map_or("-".into(), |w| format!(
-            "{:.3} deg (frame {}, polygon {}: {:.3} m2, {} px)",
-            w.tilt_deg, w.frame, w.polygon, w.area_m2, w.pixels
-        ))
-    );
-    let count = |c: eval::HeldBackCount| format!("{} ({:.2} m2)", c.polygons, c.area_m2);
-    println!(
-        "level polygons held back: normal not known to {} deg (1 sigma) {}, not one plane {}, no plane {}",
-        extract::polygon::MAX_TILT_SIGMA_DEG,
+        "level polygons marked not steppable: tilt not known to {} deg at 95 % {}, under {} px {}",
+        extract::uncertainty::STEPPABLE_TILT_DEG,
         count(level.tilt_unknown),
+        extract::uncertainty::MIN_STEPPABLE_PIXELS,
+        count(level.few_pixels),
+    );
+    println!(
+        "level polygons held back: not one plane {}, no plane {}",
         count(level.not_one_plane),
         count(level.no_plane)
+    );
+    let big = eval::MIN_STEPPABLE_TREAD_PIXELS_320 * s.intrinsics.pixel_count() / (320 * 240);
+    let big_treads: Vec<&eval::TreadScore> = scores.iter().filter(|t| t.visible_pixels >= big).collect();
+    println!(
+        "treads with >= {big} visible pixels: {}, found {}, found and steppable {}",
+        big_treads.len(),
+        big_treads.iter().filter(|t| t.found).count(),
+        big_treads.iter().filter(|t| t.footing.is_some_and(|f| f.is_steppable())).count()
     );
     Ok(())
 }
@@ -240,12 +260,12 @@ pub fn evaluate_map(s: &Sequence, path: &Path, json: bool, debug: Option<&Path>)
     }
     println!("{} against {}: {} map polygons", path.display(), s.dir.display(), map.polygons.len());
     println!(
-        "{:>5} {:>9} {:>8} {:>7} {:>9} {:>9} {:>10} {:>10} {:>12}",
-        "step", "seen m2", "polygon", "IOU", "over m2", "under m2", "alpha deg", "height m", "height err mm"
+        "{:>5} {:>9} {:>8} {:>7} {:>9} {:>9} {:>10} {:>10} {:>13} {:>12}",
+        "step", "seen m2", "polygon", "IOU", "over m2", "under m2", "alpha deg", "height m", "height err mm", "footing"
     );
     for t in &scores {
         println!(
-            "{:>5} {:>9.4} {:>8} {:>7.3} {:>9.4} {:>9.4} {:>10.3} {:>10.4} {:>12.2}",
+            "{:>5} {:>9.4} {:>8} {:>7.3} {:>9.4} {:>9.4} {:>10.3} {:>10.4} {:>13.2} {:>12}",
             t.step,
             t.seen_area_m2,
             t.polygon.map_or("-".into(), |id| id.to_string()),
@@ -254,7 +274,8 @@ pub fn evaluate_map(s: &Sequence, path: &Path, json: bool, debug: Option<&Path>)
             t.under_m2,
             t.alpha_deg.unwrap_or(f64::NAN),
             t.height.unwrap_or(f64::NAN),
-            t.height_error.map_or(f64::NAN, |e| e * 1e3)
+            t.height_error.map_or(f64::NAN, |e| e * 1e3),
+            t.footing.map_or("-".into(), |f| format!("{f:?}"))
         );
     }
     let m = &summary;
@@ -271,6 +292,17 @@ pub fn evaluate_map(s: &Sequence, path: &Path, json: bool, debug: Option<&Path>)
         m.height_error_mean_mm,
         m.height_error_max_mm,
         m.drift_error_mm
+    );
+    println!(
+        "steppable treads {}/{}, worst tilt {:.3} deg; level map polygons (>= {} m2, within {} deg of level) {}, steppable {}, worst steppable tilt {:.3} deg",
+        m.treads_steppable,
+        m.treads_found,
+        m.steppable_tread_alpha_max_deg,
+        eval::LEVEL_MIN_AREA_M2,
+        eval::LEVEL_WITHIN_DEG,
+        m.level_polygons,
+        m.level_steppable,
+        m.level_steppable_tilt_max_deg
     );
     Ok(())
 }

@@ -10,7 +10,8 @@ use nalgebra::{Isometry3, Point3};
 use serde::Serialize;
 
 use super::{mean_std, min_visible_pixels, treads};
-use crate::map::MapSnapshot;
+use crate::extract::Footing;
+use crate::map::{MapPolygon, MapSnapshot};
 use crate::ring::fill_rings;
 use crate::sequence::{Sequence, SequenceError};
 
@@ -39,6 +40,8 @@ pub struct MapTreadScore {
     pub height: Option<f64>,
     /// |height - true height|, m.
     pub height_error: Option<f64>,
+    /// Whether the map publishes that polygon as steppable.
+    pub footing: Option<Footing>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -55,6 +58,15 @@ pub struct MapSummary {
     pub height_error_max_mm: f64,
     /// The map's drift estimate minus the drift injected into the last frame's pose, mm.
     pub drift_error_mm: f64,
+    /// Treads found whose polygon is steppable, and the largest tilt of those, degrees.
+    pub treads_steppable: usize,
+    pub steppable_tread_alpha_max_deg: f64,
+    /// Every map polygon within `LEVEL_WITHIN_DEG` of level and at least `LEVEL_MIN_AREA_M2`
+    /// (every level surface of the scenes is exactly level): how many, how many steppable,
+    /// and the worst tilt of a steppable one, degrees.
+    pub level_polygons: usize,
+    pub level_steppable: usize,
+    pub level_steppable_tilt_max_deg: f64,
 }
 
 /// Scores `map` against `seq`'s truth and labels; with `pictures`, also one picture per tread
@@ -178,6 +190,7 @@ pub fn score_map_seen_in(
             alpha_deg: polygon.filter(|_| found).map(|p| p.normal[2].abs().clamp(0.0, 1.0).acos().to_degrees()),
             height,
             height_error: height.map(|z| (z - t.height).abs()),
+            footing: polygon.filter(|_| found).map(|p| p.footing),
         });
     }
     Ok((out, images))
@@ -196,6 +209,12 @@ pub fn summarise(scores: &[MapTreadScore], map: &MapSnapshot, seq: &Sequence) ->
         .collect();
     let (alpha_mean_deg, alpha_std_deg) = mean_std(&alphas);
     let (step_error_mean_mm, step_error_std_mm) = mean_std(&steps);
+    let steppable: Vec<&MapTreadScore> =
+        scores.iter().filter(|s| s.footing.is_some_and(Footing::is_steppable)).collect();
+    let level: Vec<(&MapPolygon, f64)> = (map.polygons.iter())
+        .map(|p| (p, p.normal[2].abs().min(1.0).acos().to_degrees()))
+        .filter(|(p, tilt)| p.area >= super::LEVEL_MIN_AREA_M2 && *tilt <= super::LEVEL_WITHIN_DEG)
+        .collect();
     MapSummary {
         treads_seen: scores.len(),
         treads_found: scores.iter().filter(|s| s.found).count(),
@@ -208,5 +227,13 @@ pub fn summarise(scores: &[MapTreadScore], map: &MapSnapshot, seq: &Sequence) ->
         height_error_mean_mm: mean_std(&heights).0,
         height_error_max_mm: heights.iter().copied().fold(f64::NAN, f64::max),
         drift_error_mm: (map.drift_z - injected) * 1e3,
+        treads_steppable: steppable.len(),
+        steppable_tread_alpha_max_deg: steppable.iter().filter_map(|s| s.alpha_deg).fold(f64::NAN, f64::max),
+        level_polygons: level.len(),
+        level_steppable: level.iter().filter(|(p, _)| p.footing.is_steppable()).count(),
+        level_steppable_tilt_max_deg: (level.iter())
+            .filter(|(p, _)| p.footing.is_steppable())
+            .map(|(_, tilt)| *tilt)
+            .fold(f64::NAN, f64::max),
     }
 }

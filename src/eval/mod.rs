@@ -13,7 +13,7 @@ pub mod segmentation;
 use nalgebra::Isometry3;
 use serde::Serialize;
 
-use crate::extract::{HeldBack, HoldBack, Polygon};
+use crate::extract::{Footing, HeldBack, HoldBack, Polygon};
 use crate::sequence::Truth;
 use crate::types::Intrinsics;
 
@@ -38,7 +38,13 @@ pub struct TreadScore {
     /// The standard deviation of the polygon's normal along its worst axis, as its
     /// plane uncertainty reports it, degrees (when found): what alpha is held against.
     pub tilt_sigma_deg: Option<f64>,
+    /// Whether the polygon found is published as steppable (when found).
+    pub footing: Option<Footing>,
 }
+
+/// A tread with this many visible pixels at 320x240 (scaled by image area for other sizes)
+/// must be found and steppable: the footing rule may not hide real treads.
+pub const MIN_STEPPABLE_TREAD_PIXELS_320: usize = 1500;
 
 /// A polygon counts as the tread when it overlaps it at least this much.
 pub const FOUND_IOU: f64 = 0.5;
@@ -79,6 +85,7 @@ pub fn score_frame(
             alpha_deg: world.as_ref().map(|p| p.normal[2].clamp(-1.0, 1.0).acos().to_degrees()),
             height: world.as_ref().map(|p| p.centroid()[2]),
             tilt_sigma_deg: found.then(|| polygons[k].uncertainty.tilt_sigma_rad().to_degrees()),
+            footing: found.then(|| polygons[k].footing),
         });
     }
     scores
@@ -158,7 +165,7 @@ pub fn step_errors(scores: &[TreadScore], rise: f64) -> Vec<f64> {
 }
 
 /// Published polygons within this of level, and at least `LEVEL_MIN_AREA_M2` large, are
-/// ground a planner may put a foot on: the steppable bar holds their tilt to 1 deg.
+/// ground a planner may put a foot on: the steppable ones' tilt is held to 1 deg.
 pub const LEVEL_WITHIN_DEG: f64 = 25.0;
 pub const LEVEL_MIN_AREA_M2: f64 = 0.02;
 
@@ -171,6 +178,7 @@ pub struct LevelTilt {
     pub tilt_deg: f64,
     pub area_m2: f64,
     pub pixels: usize,
+    pub footing: Footing,
 }
 
 /// The angle of a camera-frame normal from the world's vertical, either way up, degrees.
@@ -185,7 +193,7 @@ pub fn level_tilts(frame: usize, polygons: &[Polygon], t_world_camera: &Isometry
         .filter(|p| p.area >= LEVEL_MIN_AREA_M2)
         .map(|p| {
             let tilt_deg = tilt_from_level_deg(p.normal, t_world_camera);
-            LevelTilt { frame, polygon: p.id, tilt_deg, area_m2: p.area, pixels: p.pixel_count }
+            LevelTilt { frame, polygon: p.id, tilt_deg, area_m2: p.area, pixels: p.pixel_count, footing: p.footing }
         })
         .filter(|t| t.tilt_deg <= LEVEL_WITHIN_DEG)
         .collect()
@@ -200,40 +208,63 @@ pub fn level_held_back(held: &[HeldBack], t_world_camera: &Isometry3<f64>) -> Ve
         .collect()
 }
 
-/// How many level polygons were held back for a reason, and their area, m^2.
+/// How many level polygons a rule took out, and their area, m^2.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
-pub struct HeldBackCount {
+pub struct PolygonCount {
     pub polygons: usize,
     pub area_m2: f64,
 }
 
-/// The level polygons' tilts over a whole sequence: mean, 99th percentile and the worst
-/// one; and what the rule for publishing held back.
+impl PolygonCount {
+    fn of<'a>(areas: impl Iterator<Item = &'a f64>) -> PolygonCount {
+        areas.fold(PolygonCount::default(), |c, a| PolygonCount { polygons: c.polygons + 1, area_m2: c.area_m2 + a })
+    }
+}
+
+/// The level polygons' tilts over a whole sequence: of all published, and of the
+/// steppable ones (mean, 99th percentile, the worst); what the footing rule marked not
+/// steppable, and what the extractor held back, each by reason.
 #[derive(Clone, Debug, Serialize)]
 pub struct LevelSummary {
+    pub all: TiltSummary,
+    pub steppable: TiltSummary,
+    pub tilt_unknown: PolygonCount,
+    pub few_pixels: PolygonCount,
+    pub not_one_plane: PolygonCount,
+    pub no_plane: PolygonCount,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct TiltSummary {
     pub polygons: usize,
     pub tilt_mean_deg: f64,
     pub tilt_p99_deg: f64,
     pub worst: Option<LevelTilt>,
-    pub tilt_unknown: HeldBackCount,
-    pub not_one_plane: HeldBackCount,
-    pub no_plane: HeldBackCount,
+}
+
+impl TiltSummary {
+    fn of<'a>(tilts: impl Iterator<Item = &'a LevelTilt>) -> TiltSummary {
+        let tilts: Vec<&LevelTilt> = tilts.collect();
+        let values: Vec<f64> = tilts.iter().map(|t| t.tilt_deg).collect();
+        TiltSummary {
+            polygons: tilts.len(),
+            tilt_mean_deg: mean_std(&values).0,
+            tilt_p99_deg: crate::stats::percentile(&values, 0.99),
+            worst: tilts.iter().max_by(|a, b| a.tilt_deg.total_cmp(&b.tilt_deg)).map(|&t| t.clone()),
+        }
+    }
 }
 
 pub fn summarise_level(tilts: &[LevelTilt], held_back: &[HeldBack]) -> LevelSummary {
-    let values: Vec<f64> = tilts.iter().map(|t| t.tilt_deg).collect();
-    let count = |why: fn(&HoldBack) -> bool| {
-        let of: Vec<&HeldBack> = held_back.iter().filter(|h| why(&h.why)).collect();
-        HeldBackCount { polygons: of.len(), area_m2: of.iter().fold(0.0, |sum, h| sum + h.area) }
-    };
+    let marked = |f: Footing| PolygonCount::of(tilts.iter().filter(|t| t.footing == f).map(|t| &t.area_m2));
+    let held = |why: HoldBack| PolygonCount::of(held_back.iter().filter(|h| h.why == why).map(|h| &h.area));
     LevelSummary {
-        polygons: tilts.len(),
-        tilt_mean_deg: mean_std(&values).0,
-        tilt_p99_deg: crate::stats::percentile(&values, 0.99),
-        worst: tilts.iter().max_by(|a, b| a.tilt_deg.total_cmp(&b.tilt_deg)).cloned(),
-        tilt_unknown: count(|w| matches!(w, HoldBack::TiltUnknown { .. })),
-        not_one_plane: count(|w| matches!(w, HoldBack::NotOnePlane)),
-        no_plane: count(|w| matches!(w, HoldBack::NoPlane)),
+        all: TiltSummary::of(tilts.iter()),
+        steppable: TiltSummary::of(tilts.iter().filter(|t| t.footing.is_steppable())),
+        tilt_unknown: marked(Footing::TiltUnknown),
+        few_pixels: marked(Footing::FewPixels),
+        not_one_plane: held(HoldBack::NotOnePlane),
+        no_plane: held(HoldBack::NoPlane),
     }
 }
 

@@ -37,7 +37,8 @@ pub fn write_stage_images(dir: &Path, frame: &Extraction, intr: &Intrinsics) -> 
     polygon_image(&depth, polygons, intr).save(dir.join("6_polygons.png"))
 }
 
-/// The polygons, filled in their id colours over the dimmed depth, outlined and with holes.
+/// The polygons, filled in their id colours over the dimmed depth, outlined and with holes;
+/// those not steppable only hatched (every third diagonal), so a glance tells them apart.
 pub fn polygon_image(depth: &RgbImage, polygons: &[Polygon], intr: &Intrinsics) -> RgbImage {
     let mut img = viz::dimmed(depth);
     let pixel = |v: &[f64; 3]| {
@@ -49,7 +50,10 @@ pub fn polygon_image(depth: &RgbImage, polygons: &[Polygon], intr: &Intrinsics) 
         let ring: Vec<(f32, f32)> = p.boundary.iter().map(pixel).collect();
         // Filled the way eval scores it: pixel centres inside the outline and outside the holes.
         let inside = p.image_mask(intr);
-        for (a, _) in img.pixels_mut().zip(&inside).filter(|(_, inside)| **inside) {
+        let width = intr.width as usize;
+        let shown = |i: usize| p.footing.is_steppable() || (i % width + i / width).is_multiple_of(3);
+        let filled = (img.pixels_mut().zip(&inside).enumerate()).filter(|&(i, (_, inside))| *inside && shown(i));
+        for (_, (a, _)) in filled {
             for c in 0..3 {
                 a.0[c] = ((a.0[c] as u16 + colour.0[c] as u16) / 2) as u8;
             }

@@ -28,6 +28,7 @@ use cpu::ransac::{PlaneFit, PointBatch};
 pub use params::{Images, MIN_REGION_PIXELS, StageTimes};
 pub use polygon::{FramePolygons, HeldBack, HoldBack, Polygon, VertexKind, build_polygons};
 use regions::{Outline, Segmentation, segment_and_fit};
+pub use uncertainty::Footing;
 
 /// Why a frame could not be processed.
 #[derive(Debug, thiserror::Error)]

@@ -10,7 +10,7 @@ use super::cpu::ransac::PlaneFit;
 use super::regions::Outline;
 use super::regions::{Creases, Segmentation};
 use super::trim;
-use super::uncertainty::{PlaneUncertainty, halves_agreement, plane_uncertainty};
+use super::uncertainty::{Footing, PlaneUncertainty, footing, halves_agreement, noise_lean, plane_uncertainty};
 use crate::config::PipelineConfig;
 use crate::grid::Grid;
 use crate::ring::ring_area;
@@ -52,6 +52,9 @@ pub struct Polygon {
     pub rms: f64,
     /// How well its plane is known (extract::uncertainty).
     pub uncertainty: PlaneUncertainty,
+    /// Whether a foot may trust its plane (`uncertainty::footing`).
+    #[serde(default = "Footing::unknown")]
+    pub footing: Footing,
 }
 
 impl Polygon {
@@ -114,8 +117,6 @@ pub enum HoldBack {
     TooSmall,
     /// Its inliers do not fix a plane (too few, or on a line).
     NoPlane,
-    /// Its normal's standard deviation (worst axis) is over `MAX_TILT_SIGMA_DEG`.
-    TiltUnknown { sigma_deg: f64 },
     /// Its two halves bend by more than `MAX_HALVES_BEND_DEG` (and their noise).
     NotOnePlane,
 }
@@ -139,7 +140,8 @@ pub struct FramePolygons {
 /// Polygons from regions and their plane fits: keep well-supported fits, ray cast the
 /// pixel outlines onto the planes, cut them where the planes of the neighbours they meet
 /// along a crease (`creases`) bound them, hold back what is smaller than the minimum area
-/// or whose plane is not known well enough (returned beside them, with the reason).
+/// or whose plane its inliers do not fix (returned beside them, with the reason), and
+/// judge whether a foot may trust each one kept (its `footing`).
 pub fn build_polygons(
     regions: &[Outline],
     fits: &[Option<PlaneFit>],
@@ -204,6 +206,7 @@ pub fn build_polygons(
             rms: fit.rms,
             // Known once the polygon is kept (below): most regions are not.
             uncertainty: PlaneUncertainty::default(),
+            footing: Footing::unknown(),
         });
         samples.push(&region.points);
         plane_fits.push(*fit);
@@ -222,9 +225,9 @@ pub fn build_polygons(
             .unzip();
         p.area = ring_area(&p.boundary, &n) - p.holes.iter().map(|h| ring_area(h, &n)).sum::<f64>();
     }
-    // Kept: big enough, and a plane its inliers fix well (not all on a line, not a
-    // normal too uncertain to stand on, not two surfaces fitted as one). A plane that
-    // fails is held back, not refitted: its pixels do not hold a better one.
+    // Kept: big enough, and a plane its inliers fix (not all on a line, not two surfaces
+    // fitted as one); then judged whether a foot may trust it. A plane that fails is held
+    // back, not refitted: its pixels do not hold a better one.
     let verdicts: Vec<Result<(), HoldBack>> = out
         .par_iter_mut()
         .zip(plane_fits.par_iter())
@@ -237,12 +240,15 @@ pub fn build_polygons(
             let Some((u, cut)) = plane_uncertainty(&sample.points, sample.stride, fit, dist) else {
                 return Err(HoldBack::NoPlane);
             };
-            if u.tilt_sigma_rad() > MAX_TILT_SIGMA_DEG.to_radians() {
-                return Err(HoldBack::TiltUnknown { sigma_deg: u.tilt_sigma_rad().to_degrees() });
-            }
             match halves_agreement(&sample.points, sample.stride, fit, dist, &cut) {
                 Some(h) if h.one_surface(MAX_HALVES_BEND_DEG.to_radians()) => {
-                    p.uncertainty = u;
+                    // Two leans its noise does not show: the rays' along a narrow support,
+                    // and a share of a bend beyond noise, towards the cut's normal.
+                    let bend = BEND_LEAN_SHARE * h.bend_beyond_noise_rad();
+                    let bend_lean = u.axes.map(|e| bend * cut.across.dot(&Vector3::from(e)));
+                    let noise_lean = noise_lean(&sample.points, fit, dist, &u);
+                    p.uncertainty = u.with_lean(noise_lean).with_lean(bend_lean);
+                    p.footing = footing(&p.uncertainty, p.pixel_count);
                     Ok(())
                 }
                 _ => Err(HoldBack::NotOnePlane),
@@ -281,16 +287,18 @@ pub fn build_polygons(
     (out, held_back)
 }
 
-/// A polygon whose normal has a larger standard deviation (worst axis) is held back:
-/// two sigma of it would pass the one-degree bar a foot can stand on.
-pub const MAX_TILT_SIGMA_DEG: f64 = 0.5;
-
 /// Two halves of a polygon's inliers may bend by this much, or by their noise's three
 /// sigma if that is more, and still count as one plane. A region that took in a few rows
 /// of its neighbour tilts by a fifth to a quarter of its halves' bend (on the mock stairs'
 /// partial views: bends of 2.5, 3.2, 7.4, 9.4, 13 and 21 deg tilted the whole fit by 0.5,
 /// 0.7, 1.8, 2.3, 2.7 and 4.4 deg), so 4 deg holds back what would pass the 1 deg bar.
 pub const MAX_HALVES_BEND_DEG: f64 = 4.0;
+
+/// A region whose halves bend by more than their noise (3 sigma) leans its whole fit by up
+/// to this share of the excess (the measurements above: a fifth to a quarter); the
+/// polygon's covariance counts that lean, so a bend under `MAX_HALVES_BEND_DEG` that would
+/// still tilt it past the steppable bar marks it not steppable.
+pub const BEND_LEAN_SHARE: f64 = 0.25;
 
 /// Outline vertices within this many pixels of the image's edge are on its border.
 pub const BORDER_PX: i64 = 3;

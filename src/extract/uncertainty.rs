@@ -12,7 +12,7 @@
 //! covariance of (a1, a2, shift) for the unweighted fit is then the sandwich
 //! H^-1 (sum s_i^2 a_i a_i^T) H^-1 with H = sum a_i a_i^T.
 
-use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use nalgebra::{Matrix2, Matrix3, SymmetricEigen, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::cpu::ransac::PlaneFit;
@@ -139,6 +139,68 @@ impl PlaneUncertainty {
     pub fn moved(&self, rotate: impl Fn([f64; 3]) -> [f64; 3], translate: impl Fn([f64; 3]) -> [f64; 3]) -> Self {
         PlaneUncertainty { centre: translate(self.centre), axes: self.axes.map(rotate), cov: self.cov }
     }
+
+    /// The same with a systematic tilt `lean` (rad, along `axes`) counted as an error of its
+    /// own: a fit that may lean is known no better than its lean.
+    pub fn with_lean(&self, lean: [f64; 2]) -> PlaneUncertainty {
+        let mut cov = self.cov;
+        for (r, br) in lean.iter().enumerate() {
+            for (k, bk) in lean.iter().enumerate() {
+                cov[r][k] += br * bk;
+            }
+        }
+        PlaneUncertainty { cov, ..*self }
+    }
+}
+
+/// Whether a foot may trust a polygon's plane, and if not, why: [`footing`]'s verdict, the
+/// one rule for the frame's polygons and the map's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Footing {
+    Steppable,
+    /// Its tilt is not known to `STEPPABLE_TILT_DEG` at 95 %: its noise, or the lean a
+    /// support narrow in one direction gives its fit, is too large.
+    TiltUnknown,
+    /// No frame saw it with `MIN_STEPPABLE_PIXELS` pixels.
+    FewPixels,
+}
+
+impl Footing {
+    pub fn is_steppable(self) -> bool {
+        self == Footing::Steppable
+    }
+
+    /// What a polygon read without a verdict is taken as: not steppable until a frame
+    /// shows it is.
+    pub fn unknown() -> Footing {
+        Footing::TiltUnknown
+    }
+}
+
+/// A steppable plane's tilt is known to this at 95 % (1.96 sigma along its worst axis).
+pub const STEPPABLE_TILT_DEG: f64 = 1.0;
+
+/// A steppable plane was seen whole by at least this many pixels in one frame. A region's
+/// outline pixels mix it with its neighbours; in a small one they are a large share (4 /
+/// sqrt(N): 28 % at 200), and they lean its fit more than its noise does, which its
+/// covariance does not see (far patches of 100 to 150 pixels leaned twice their 1.96 sigma).
+pub const MIN_STEPPABLE_PIXELS: usize = 200;
+
+/// The rule for what is published as steppable: a plane whose tilt is known to
+/// `STEPPABLE_TILT_DEG` at 95 % (by its covariance, which counts the leans its noise does
+/// not show: `noise_lean`, and a bend between its halves), seen by at least `MIN_STEPPABLE_PIXELS` pixels in one frame. A
+/// plane of unknown uncertainty (a hand-made polygon, not measured) is taken as given.
+pub fn footing(u: &PlaneUncertainty, most_pixels: usize) -> Footing {
+    if !u.is_known() {
+        Footing::Steppable
+    } else if most_pixels < MIN_STEPPABLE_PIXELS {
+        Footing::FewPixels
+    } else if 1.96 * u.tilt_sigma_rad() > STEPPABLE_TILT_DEG.to_radians() {
+        Footing::TiltUnknown
+    } else {
+        Footing::Steppable
+    }
 }
 
 /// The variance of the across-plane noise of a point `p` (camera frame) whose dot product
@@ -216,6 +278,49 @@ pub fn plane_uncertainty(
     let row = |k: usize| [cov[(k, 0)], cov[(k, 1)], cov[(k, 2)]];
     Some((PlaneUncertainty { centre: c.into(), axes: [e1.into(), e2.into()], cov: [row(0), row(1), row(2)] }, cut))
 }
+
+/// The tilt (rad, along `u.axes`) that the least-squares fit of `fit`'s inliers is expected
+/// to have from the sensor's noise alone. A pixel's noise runs along its ray, partly along
+/// the plane; across a support that is narrow in one direction that part rivals the
+/// surface's own spread, and the fitted normal leans towards the rays (errors in
+/// variables). To first order the normal moves by -A^-1 b: A the inliers' spread in the
+/// plane, b the rays' noise covariance between the plane's axes and its normal, at the
+/// noise scale of the fit's residuals (the module's model). `u` is `plane_uncertainty` of
+/// the same points and fit: its centre and axes. A ratio of sums over a grid of pixels: a
+/// spread-out `NOISE_LEAN_POINTS` of them give it as well as all.
+pub fn noise_lean(points: &[[f32; 3]], fit: &PlaneFit, dist: f64, u: &PlaneUncertainty) -> [f64; 2] {
+    let (n, c, [e1, e2]) = (fit.normal, Vector3::from(u.centre), u.axes.map(Vector3::from));
+    let (mut count, mut scale, mut spread, mut lean) = (0.0, 0.0, Matrix2::zeros(), Vector2::zeros());
+    for p32 in points.iter().step_by(points.len().div_ceil(NOISE_LEAN_POINTS).max(1)) {
+        let p = Vector3::new(p32[0] as f64, p32[1] as f64, p32[2] as f64);
+        let np = n.dot(&p);
+        let r = np + fit.offset;
+        if r.abs() >= dist {
+            continue;
+        }
+        let g2 = relative_variance(p32, np as f32) as f64;
+        let xy = Vector2::new((p - c).dot(&e1), (p - c).dot(&e2));
+        let ray = p / p.norm();
+        // Along the ray the variance is g^2 / cos^2; its covariance between an in-plane
+        // axis and the normal is that times (ray . e)(ray . n), cos = |ray . n|.
+        let cos = ray.dot(&n).abs().max(0.05);
+        count += 1.0;
+        scale += r * r / g2;
+        spread += xy * xy.transpose();
+        lean += Vector2::new(ray.dot(&e1), ray.dot(&e2)) * (g2 * ray.dot(&n).signum() / cos);
+    }
+    if count < 4.0 {
+        return [0.0; 2];
+    }
+    let scale = scale / (count - 3.0);
+    match spread.try_inverse() {
+        Some(inv) => (-(inv * lean) * scale).into(),
+        None => [0.0; 2],
+    }
+}
+
+/// At most about this many of a plane's points go into `noise_lean`.
+const NOISE_LEAN_POINTS: usize = 512;
 
 /// A fitted plane as `plane_uncertainty` takes its inliers' sums: the inlier distance, and
 /// lever arms x, y along `axes` from `foot` (the plane's foot of the camera).
@@ -524,6 +629,11 @@ impl HalvesAgreement {
     pub fn one_surface(&self, floor_rad: f64) -> bool {
         self.angle_rad <= (3.0 * self.sigma_rad).max(floor_rad)
     }
+
+    /// How much more than their noise's 3 sigma the halves bend, rad (0 when they do not).
+    pub fn bend_beyond_noise_rad(&self) -> f64 {
+        (self.angle_rad - 3.0 * self.sigma_rad).max(0.0)
+    }
 }
 
 /// Where a plane's inliers are cut in two: through their centroid, across the in-plane
@@ -596,6 +706,90 @@ fn split_halves_scalar(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Points of the plane through `centre` with unit normal `n`, over `[-w/2, w/2] x
+    /// [-l/2, l/2]` along `(across, along)` on a grid, each moved along its ray from the
+    /// origin by noise of `sigma` m at 1 m, growing as the module's model has it.
+    fn seen_on_rays(
+        n: Vector3<f64>,
+        centre: Vector3<f64>,
+        [across, along]: [Vector3<f64>; 2],
+        [w, l]: [f64; 2],
+        sigma: f64,
+        rng: &mut impl rand::Rng,
+    ) -> Vec<[f32; 3]> {
+        use rand_distr::{Distribution, StandardNormal};
+        let mut out = Vec::new();
+        for i in 0..12 {
+            for j in 0..150 {
+                let p = centre + across * (w * (i as f64 / 11.0 - 0.5)) + along * (l * (j as f64 / 149.0 - 0.5));
+                let (r, ray) = (p.norm(), p.normalize());
+                let cos = ray.dot(&n).abs();
+                let e: f64 = StandardNormal.sample(rng);
+                let q = p + ray * (e * sigma * (0.5 + 0.5 * r) / cos.sqrt());
+                out.push([q.x as f32, q.y as f32, q.z as f32]);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn the_noise_lean_is_the_lean_of_fits_to_a_narrow_strip_seen_at_a_slant() {
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(13);
+        // A floor 0.9 m below a camera looking ahead (y down, z ahead), 1.6 m ahead and 1 m
+        // wide, at 3 mm of noise: the mean lean of 40 fits, and of their predictions.
+        let n = Vector3::new(0.0, -1.0, 0.0);
+        let dist = 0.03;
+        let mut leans = |deep: f64| {
+            let (mut leaned, mut predicted) = (Vector2::zeros(), Vector2::zeros());
+            for _ in 0..40 {
+                let extent = [deep, 1.0];
+                let points =
+                    seen_on_rays(n, Vector3::new(0.0, 0.9, 1.6), [Vector3::z(), Vector3::x()], extent, 0.003, &mut rng);
+                let fit =
+                    crate::extract::cpu::ransac::refit(&points, [0.0, -1.0, 0.0], 0.9, dist as f32).expect("a fit");
+                let (u, _) = plane_uncertainty(&points, 1, &fit, dist).expect("an uncertainty");
+                // The fit's normal less the true one, on the fit's own axes (each trial's own).
+                let axes = u.axes.map(Vector3::from);
+                leaned -= Vector2::new(n.dot(&axes[0]), n.dot(&axes[1])) / 40.0;
+                predicted += Vector2::from(noise_lean(&points, &fit, dist, &u)) / 40.0;
+            }
+            (leaned, predicted)
+        };
+        // 4 cm deep along the view: the fits lean by about a degree, as predicted to a fifth.
+        let (leaned, predicted) = leans(0.04);
+        assert!(leaned.norm().to_degrees() > 0.5, "the strip's fits lean: {leaned:?}");
+        assert!((leaned - predicted).norm() < 0.2 * leaned.norm(), "leaned {leaned:?}, predicted {predicted:?}");
+        // 50 cm deep: under a tenth of that, either way.
+        let (wide_leaned, wide_predicted) = leans(0.5);
+        for l in [wide_leaned, wide_predicted] {
+            assert!(l.norm() < 0.1 * leaned.norm(), "{l:?} against the strip's {leaned:?}");
+        }
+    }
+
+    #[test]
+    fn the_footing_rule_marks_what_is_not_known_to_a_degree_at_95_percent_or_seen_small() {
+        let sigma_deg = |deg: f64| {
+            let s = deg.to_radians().powi(2);
+            PlaneUncertainty {
+                centre: [0.0, 0.0, 1.0],
+                axes: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+                cov: [[s, 0.0, 0.0], [0.0, s / 4.0, 0.0], [0.0, 0.0, 1e-6]],
+            }
+        };
+        let bar = STEPPABLE_TILT_DEG / 1.96;
+        assert_eq!(footing(&sigma_deg(0.99 * bar), 5000), Footing::Steppable);
+        assert_eq!(footing(&sigma_deg(1.01 * bar), 5000), Footing::TiltUnknown);
+        assert_eq!(footing(&sigma_deg(0.1), MIN_STEPPABLE_PIXELS), Footing::Steppable);
+        assert_eq!(footing(&sigma_deg(0.1), MIN_STEPPABLE_PIXELS - 1), Footing::FewPixels);
+        // A lean counts as much as noise of its size, along its axis.
+        let lean = (0.9 * bar).to_radians();
+        assert_eq!(footing(&sigma_deg(0.6 * bar).with_lean([lean, 0.0]), 5000), Footing::TiltUnknown);
+        assert_eq!(footing(&sigma_deg(0.6 * bar).with_lean([0.0, lean]), 5000), Footing::Steppable);
+        // Hand-made planes (no covariance) are taken as given.
+        assert_eq!(footing(&PlaneUncertainty::default(), 0), Footing::Steppable);
+    }
 
     #[test]
     fn fast_halves_split_is_the_scalar_one() {

@@ -1,6 +1,7 @@
 //! Conversions between polymap's own types and its ROS messages, both ways, in one place.
 
 use crate::camera::ImuSample;
+use crate::extract::Footing;
 use crate::map::{Label, MapFrame, MapPolygon, MapSnapshot, Region};
 use crate::pose::RawPose;
 use crate::ros2::msg::{
@@ -57,7 +58,24 @@ pub fn map_polygon(p: &MapPolygon) -> msg::Polygon {
         insets: p.insets.iter().map(region).collect(),
         observations: p.observations,
         plane_covariance: p.plane_covariance,
+        steppable: p.footing.is_steppable(),
+        footing: footing_code(p.footing),
+        pixels: p.pixels,
     }
+}
+
+/// A footing's `FOOTING_*` code in polymap_msgs/Polygon.
+pub fn footing_code(f: Footing) -> u8 {
+    match f {
+        Footing::Steppable => msg::Polygon::FOOTING_STEPPABLE,
+        Footing::TiltUnknown => msg::Polygon::FOOTING_TILT_UNKNOWN,
+        Footing::FewPixels => msg::Polygon::FOOTING_FEW_PIXELS,
+    }
+}
+
+/// The footing of a `FOOTING_*` code; None for one polymap never sends.
+pub fn footing_of(code: u8) -> Option<Footing> {
+    [Footing::Steppable, Footing::TiltUnknown, Footing::FewPixels].into_iter().find(|&f| footing_code(f) == code)
 }
 
 fn region(r: &Region) -> msg::Region {
@@ -67,7 +85,8 @@ fn region(r: &Region) -> msg::Region {
     }
 }
 
-/// A map polygon back from its message; None for a label code polymap never sends.
+/// A map polygon back from its message; None for a label or footing code polymap never
+/// sends, or a `steppable` that contradicts its footing.
 pub fn map_polygon_of(p: &msg::Polygon) -> Option<MapPolygon> {
     Some(MapPolygon {
         id: p.id,
@@ -90,6 +109,8 @@ pub fn map_polygon_of(p: &msg::Polygon) -> Option<MapPolygon> {
         observations: p.observations,
         step: (p.step >= 0).then_some(p.step as u32),
         plane_covariance: p.plane_covariance,
+        footing: footing_of(p.footing).filter(|f| f.is_steppable() == p.steppable)?,
+        pixels: p.pixels,
     })
 }
 
@@ -107,6 +128,9 @@ pub fn frame_polygon(p: &crate::extract::Polygon) -> msg::Polygon {
         holes: p.holes.iter().map(|h| ring(h)).collect(),
         observations: 1,
         plane_covariance: if p.uncertainty.is_known() { p.uncertainty.coefficient_covariance() } else { [0.0; 16] },
+        steppable: p.footing.is_steppable(),
+        footing: footing_code(p.footing),
+        pixels: u32::try_from(p.pixel_count).unwrap_or(u32::MAX),
         ..msg::Polygon::default()
     }
 }
@@ -225,10 +249,12 @@ pub fn markers(header: &Header, polygons: &[&msg::Polygon], removed: &[u64]) -> 
         .iter()
         .map(|p| {
             let mut m = marker(header, p.id, MARKER_ADD);
-            let [r, g, b] = label_of(p.label)
+            // Not steppable: grey and faint, whatever its label.
+            let [r, g, b] = (label_of(p.label).filter(|_| p.steppable))
                 .map(|l| crate::map::render::label_colour(l, (p.step >= 0).then_some(p.step as u32)).0)
                 .unwrap_or([200, 200, 200]);
-            m.color = ColorRgba { r: r as f32 / 255.0, g: g as f32 / 255.0, b: b as f32 / 255.0, a: 1.0 };
+            let a = if p.steppable { 1.0 } else { 0.4 };
+            m.color = ColorRgba { r: r as f32 / 255.0, g: g as f32 / 255.0, b: b as f32 / 255.0, a };
             m.points = p.boundary.clone();
             m.points.extend(p.boundary.first().copied());
             m
@@ -239,14 +265,14 @@ pub fn markers(header: &Header, polygons: &[&msg::Polygon], removed: &[u64]) -> 
 }
 
 /// A frame's polygons as the paper authors' ROS 1 node sends them on `/polygon_new_markers`:
-/// one blue LINE_STRIP per polygon (id its index in the frame, ns `polygons_new`, living
+/// one blue LINE_STRIP per steppable polygon (id its index among them, ns `polygons_new`, living
 /// 0.5 s, 5 cm wide), its outline closed by the first vertex again. Level outlines are
 /// simplified to their corners ([`corner_outline`]): the vendor's stair planner takes a
 /// marker's first four points as a tread's corners.
 pub fn polygon_new_markers(frame: &FramePolygons) -> MarkerArray {
-    let markers = frame
-        .polygons
-        .iter()
+    // The vendor's planner steps on what it gets: only steppable polygons.
+    let markers = (frame.polygons.iter())
+        .filter(|p| p.steppable)
         .enumerate()
         .map(|(i, p)| {
             let mut m = marker(&frame.header, i as u64, MARKER_ADD);
@@ -494,5 +520,42 @@ mod tests {
         for c in corners {
             assert!(out.iter().any(|p| (p.x - c[0]).hypot(p.y - c[1]) < 1e-9), "corner {c:?} in {out:?}");
         }
+    }
+
+    #[test]
+    fn only_steppable_polygons_reach_the_vendor_topic_and_footing_round_trips() {
+        let square = |z: f64, footing: Footing| crate::extract::Polygon {
+            id: 0,
+            normal: [0.0, 0.0, 1.0],
+            offset: -z,
+            area: 0.09,
+            boundary: vec![[0.0, 0.0, z], [0.3, 0.0, z], [0.3, 0.3, z], [0.0, 0.3, z]],
+            holes: vec![],
+            boundary_kinds: vec![Default::default(); 4],
+            hole_kinds: vec![],
+            pixel_count: 900,
+            inlier_ratio: 1.0,
+            rms: 0.001,
+            uncertainty: Default::default(),
+            footing,
+        };
+        let polygons =
+            [square(0.1, Footing::Steppable), square(0.2, Footing::TiltUnknown), square(0.3, Footing::FewPixels)];
+        let frame = frame_polygons(0, "camera", &polygons);
+        assert_eq!(
+            frame.polygons.iter().map(|p| (p.steppable, p.footing)).collect::<Vec<_>>(),
+            [
+                (true, msg::Polygon::FOOTING_STEPPABLE),
+                (false, msg::Polygon::FOOTING_TILT_UNKNOWN),
+                (false, msg::Polygon::FOOTING_FEW_PIXELS)
+            ]
+        );
+        let strips = polygon_new_markers(&frame).markers;
+        assert_eq!(strips.len(), 1, "only the steppable one");
+        assert!(strips[0].points.iter().all(|p| p.z == 0.1) && strips[0].id == 0);
+        for f in [Footing::Steppable, Footing::TiltUnknown, Footing::FewPixels] {
+            assert_eq!(footing_of(footing_code(f)), Some(f));
+        }
+        assert_eq!(footing_of(7), None);
     }
 }

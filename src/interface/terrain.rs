@@ -38,10 +38,12 @@ pub fn planar_terrain(
     let spec = GridSpec::around(robot, cfg.resolution_m, [cfg.length_x_m, cfg.length_y_m]);
     let min_up = cfg.max_tilt_deg.to_radians().cos();
     let standable: Vec<&MapPolygon> = s.polygons.iter().filter(|p| p.normal[2].abs() >= min_up).collect();
-    // Regions: the standable surfaces a foot fits on (planners need at least one inset) near
-    // the grid, so the message stays the grid's size however large the map grows.
+    // Regions: the standable surfaces a foot fits on (planners need at least one inset) and
+    // may trust (steppable) near the grid, so the message stays the grid's size however
+    // large the map grows. The elevation keeps every standable surface: the terrain's shape.
     let near = |p: &MapPolygon| overlaps(&spec, &p.boundary);
-    let regions: Vec<&MapPolygon> = standable.iter().copied().filter(|p| !p.insets.is_empty() && near(p)).collect();
+    let regions: Vec<&MapPolygon> =
+        (standable.iter().copied()).filter(|p| p.footing.is_steppable() && !p.insets.is_empty() && near(p)).collect();
     let surfaces: Vec<Surface> = standable
         .iter()
         .map(|&p| Surface { polygon: p, region: regions.iter().position(|r| r.id == p.id).map(|i| i as u32) })

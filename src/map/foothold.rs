@@ -1,6 +1,7 @@
 //! Footholds: a convex region of the map where a foot fits around a point, as a footstep
-//! planner asks for it. Only insets count (the polygons shrunk by the foot margin, holes
-//! grown by it), so a foot placed anywhere in the answer stays on the surface.
+//! planner asks for it. Only insets of steppable polygons count (the polygons shrunk by the
+//! foot margin, holes grown by it), so a foot placed anywhere in the answer stays on a
+//! surface whose plane is known.
 
 use geo::{Coord, Distance, Euclidean, Point, Polygon as Shape};
 
@@ -24,12 +25,13 @@ pub type Foothold<'a> = Option<Found<'a>>;
 pub const MAX_HEIGHT_DIFFERENCE_M: f64 = 0.3;
 
 /// The largest convex region around `p` (seen from above) inside the inset under it, on a
-/// horizontal surface within [`MAX_HEIGHT_DIFFERENCE_M`] of its height; failing that, around
-/// the nearest point of the nearest such inset.
+/// steppable horizontal surface within [`MAX_HEIGHT_DIFFERENCE_M`] of its height; failing
+/// that, around the nearest point of the nearest such inset.
 pub fn foothold(s: &MapSnapshot, p: [f64; 3]) -> Foothold<'_> {
     let at = Coord { x: p[0], y: p[1] };
     let mut best: Option<(f64, f64, &MapPolygon, Shape<f64>)> = None;
-    for poly in s.polygons.iter().filter(|q| q.label.is_horizontal() && q.normal[2].abs() > 1e-3) {
+    let footholds = s.polygons.iter().filter(|q| q.footing.is_steppable() && q.label.is_horizontal());
+    for poly in footholds.filter(|q| q.normal[2].abs() > 1e-3) {
         let dz = (poly.height_at(at.x, at.y) - p[2]).abs();
         if dz > MAX_HEIGHT_DIFFERENCE_M {
             continue;

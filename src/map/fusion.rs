@@ -40,6 +40,7 @@ impl PolygonMap {
             moments: o.moments,
             plane: o.plane,
             uncertainty: o.uncertainty,
+            most_pixels: o.pixels,
             observations: 1,
             misses: 0,
             aabb: o.aabb,
@@ -78,6 +79,7 @@ impl PolygonMap {
             e.shape = shown(e.seen.as_ref(), e.latest.as_ref(), max_vertices).unwrap_or(e.shape.clone());
         }
         e.uncertainty = e.uncertainty.fused_with(&o.uncertainty);
+        e.most_pixels = e.most_pixels.max(o.pixels);
         refit(e, &o.moments, 1);
         self.file(id);
     }
@@ -95,6 +97,7 @@ impl PolygonMap {
         e.confirmed = union_into(e.confirmed.take(), theirs, max_vertices);
         e.shape = shown(e.seen.as_ref(), e.latest.as_ref(), max_vertices).unwrap_or(e.shape.clone());
         e.uncertainty = e.uncertainty.fused_with(&o.uncertainty);
+        e.most_pixels = e.most_pixels.max(o.most_pixels);
         refit(e, &o.moments, o.observations);
         self.file(id);
     }
@@ -224,6 +227,8 @@ pub(super) fn publish(id: u64, e: &Entry, (label, step): labels::Labelled, foot_
         observations: e.observations,
         step,
         plane_covariance: plane_covariance(&e.uncertainty, &n, e.centroid),
+        footing: footing(&e.uncertainty, e.most_pixels as usize),
+        pixels: e.most_pixels,
     }
 }
 

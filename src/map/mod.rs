@@ -39,7 +39,7 @@ use rstar::{AABB, RTree};
 use serde::{Deserialize, Serialize};
 
 use crate::config::MapConfig;
-use crate::extract::uncertainty::{PlaneUncertainty, in_plane_axes};
+use crate::extract::uncertainty::{Footing, PlaneUncertainty, footing, in_plane_axes};
 use crate::extract::{Grid, Polygon, VertexKind};
 use crate::types::Intrinsics;
 use clearing::*;
@@ -61,6 +61,8 @@ struct Entry {
     plane: Plane,
     /// Every observation's plane covariance fused, about the first one's centre and axes.
     uncertainty: PlaneUncertainty,
+    /// The most pixels one frame saw it with.
+    most_pixels: u32,
     observations: u32,
     /// Frames in a row that contradicted it.
     misses: u32,
@@ -89,6 +91,8 @@ struct Observation {
     plane: Plane,
     moments: Moments,
     uncertainty: PlaneUncertainty,
+    /// The pixels its frame saw it with (a snapshot: the most any frame did).
+    pixels: u32,
     aabb: [[f64; 3]; 2],
     horizontal: bool,
     /// How far each vertex of its outline (then of each hole) is pulled in before what it

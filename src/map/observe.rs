@@ -48,6 +48,7 @@ impl PolygonMap {
                     plane: Plane { normal, offset },
                     moments,
                     uncertainty: w.uncertainty,
+                    pixels: u32::try_from(w.pixel_count).unwrap_or(u32::MAX),
                     horizontal,
                     erode,
                     erode_holes,

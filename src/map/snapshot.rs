@@ -45,6 +45,7 @@ impl PolygonMap {
                 inlier_ratio: 1.0,
                 rms: 0.0,
                 uncertainty: Default::default(),
+                footing: p.footing,
             };
             if let Some(problem) = polygon_problem(&as_frame_polygon) {
                 return Err(SnapshotProblem::Polygon(Rejection::Polygon { id: p.id, problem }));
@@ -63,6 +64,7 @@ impl PolygonMap {
                 plane: Plane { normal, offset: p.offset },
                 moments,
                 uncertainty,
+                pixels: p.pixels,
                 horizontal: false,
                 erode: vec![0.0; p.boundary.len()],
                 erode_holes: p.holes.iter().map(|h| vec![0.0; h.len()]).collect(),

@@ -32,6 +32,14 @@ pub struct MapPolygon {
     /// (no observation said; a snapshot keeps it).
     #[serde(default = "unknown_covariance")]
     pub plane_covariance: [f64; 16],
+    /// Whether a foot may trust its plane: the frame polygons' rule (extract::uncertainty::
+    /// footing) on the fused covariance and the most pixels one frame saw it with, so a
+    /// polygon becomes steppable as observations shrink its covariance.
+    #[serde(default = "Footing::unknown")]
+    pub footing: Footing,
+    /// The most pixels one frame saw it with.
+    #[serde(default)]
+    pub pixels: u32,
 }
 
 pub(super) fn unknown_covariance() -> [f64; 16] {

@@ -183,7 +183,11 @@ def run(peer, args):
                 "width": int(streams["/camera/camera/infra1/image_rect_raw"].first.width),
                 "encoding": streams["/camera/camera/infra1/image_rect_raw"].first.encoding},
             "map": {"polygons": len(response.map.polygons), "frame_id": response.map.header.frame_id,
-                    "treads": sum(1 for p in response.map.polygons if int(p.label) == 2)},
+                    "treads": sum(1 for p in response.map.polygons if int(p.label) == 2),
+                    "steppable_treads": sum(1 for p in response.map.polygons if int(p.label) == 2 and bool(p.steppable)),
+                    # steppable says footing == FOOTING_STEPPABLE (0), and footing is one of the three.
+                    "footing_consistent": all(bool(p.steppable) == (int(p.footing) == 0) and int(p.footing) in (0, 1, 2)
+                                              for p in response.map.polygons)},
             "map_reply": {"attachment": reply_att is not None, "echoes_seq": reply_att is not None and reply_att[0] == seq,
                           "echoes_gid": reply_att is not None and reply_att[2] == gid},
             "foothold": {"found": bool(f_response.foothold.found), "contains": bool(f_response.foothold.contains),

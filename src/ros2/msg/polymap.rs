@@ -44,6 +44,12 @@ ros_message! {
         pub observations: u32,
         /// Covariance of (normal x, y, z, offset), row-major; all zero when unknown.
         pub plane_covariance: [f64; 16],
+        /// `footing == FOOTING_STEPPABLE`: planners may put a foot on it.
+        pub steppable: bool,
+        /// One of the `FOOTING_*` constants.
+        pub footing: u8,
+        /// The most pixels one frame saw it with.
+        pub pixels: u32,
     }
 
     /// polymap_msgs/FramePolygons: one depth frame's polygons, as extracted.
@@ -158,6 +164,12 @@ impl Polygon {
     pub const LABEL_RISER: u8 = 4;
     pub const LABEL_WALL: u8 = 5;
     pub const LABEL_SLOPE: u8 = 6;
+    /// Its tilt is known to 1 deg at 95 %: a foot may trust it.
+    pub const FOOTING_STEPPABLE: u8 = 0;
+    /// Its tilt is not (its noise, or the lean of a narrow support).
+    pub const FOOTING_TILT_UNKNOWN: u8 = 1;
+    /// No frame saw it with enough pixels to tell.
+    pub const FOOTING_FEW_PIXELS: u8 = 2;
 }
 
 /// polymap_msgs/srv/GetMap: the whole map.
