@@ -291,8 +291,11 @@ pub fn build_polygons(
 /// sigma if that is more, and still count as one plane. A region that took in a few rows
 /// of its neighbour tilts by a fifth to a quarter of its halves' bend (on the mock stairs'
 /// partial views: bends of 2.5, 3.2, 7.4, 9.4, 13 and 21 deg tilted the whole fit by 0.5,
-/// 0.7, 1.8, 2.3, 2.7 and 4.4 deg), so 4 deg holds back what would pass the 1 deg bar.
-pub const MAX_HALVES_BEND_DEG: f64 = 4.0;
+/// 0.7, 1.8, 2.3, 2.7 and 4.4 deg). Under this bar the region is published and the
+/// footing rule counts a quarter of the bend in its covariance (`BEND_LEAN_SHARE`), so one
+/// that would tilt past the steppable bar is marked; over it, more of the region is the
+/// other surface than a foot would find (the real ABW faces that bend 4-8 deg are whole).
+pub const MAX_HALVES_BEND_DEG: f64 = 8.0;
 
 /// A region whose halves bend by more than their noise (3 sigma) leans its whole fit by up
 /// to this share of the excess (the measurements above: a fifth to a quarter); the
