@@ -349,6 +349,8 @@ fn a_rospy_node_receives_every_topic_feeds_odometry_and_calls_the_services() {
 
     // The services, from rospy and from rosservice.
     assert!(v["get_map"]["treads"].as_u64().unwrap() >= 3, "{}", v["get_map"]);
+    assert_eq!(v["get_map"]["footing_consistent"], true, "{}", v["get_map"]);
+    assert!(v["get_map"]["steppable_treads"].as_u64().unwrap() >= 3, "{}", v["get_map"]);
     assert_eq!(v["get_map"]["frame"], "map");
     assert_eq!(v["get_foothold"]["found"], true, "{}", v["get_foothold"]);
     let whole_map = whole_map.unwrap();

@@ -32,7 +32,7 @@ from sensor_msgs.msg import CameraInfo, Image, Imu  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
-from polymap_msgs.msg import FramePolygons, Map, MapUpdate, Status  # noqa: E402
+from polymap_msgs.msg import FramePolygons, Map, MapUpdate, Polygon, Status  # noqa: E402
 from polymap_msgs.srv import GetFoothold, GetMap  # noqa: E402
 from vins_schedule import Schedule  # noqa: E402
 
@@ -202,6 +202,11 @@ def main():
                              "after_s": None if late["markers"].first_at is None else late["markers"].first_at - joined},
             "seconds_since_odometry": joined - stopped_at,
             "get_map": {"polygons": len(whole.polygons), "treads": sum(1 for p in whole.polygons if p.label == 2),
+                        "steppable_treads": sum(1 for p in whole.polygons if p.label == 2 and p.steppable),
+                        # genpy's own constants: steppable says footing is FOOTING_STEPPABLE.
+                        "footing_consistent": all(p.steppable == (p.footing == Polygon.FOOTING_STEPPABLE) and
+                                                  p.footing in (Polygon.FOOTING_STEPPABLE, Polygon.FOOTING_TILT_UNKNOWN,
+                                                                Polygon.FOOTING_FEW_PIXELS) for p in whole.polygons),
                         "frame": whole.header.frame_id, "version": whole.version},
             "get_foothold": {"found": foothold.found, "contains": foothold.contains, "label": foothold.label},
         }
