@@ -557,5 +557,29 @@ mod tests {
             assert_eq!(footing_of(footing_code(f)), Some(f));
         }
         assert_eq!(footing_of(7), None);
+        // A map polygon whose steppable contradicts its footing, or whose footing is unknown,
+        // is refused as it is read.
+        let mut p = map_polygon(&crate::map::MapPolygon {
+            id: 3,
+            label: Label::Tread,
+            normal: [0.0, 0.0, 1.0],
+            offset: -0.1,
+            area: 0.09,
+            centroid: [0.15, 0.15, 0.1],
+            boundary: polygons[0].boundary.clone(),
+            holes: vec![],
+            convex_pieces: vec![],
+            insets: vec![],
+            observations: 2,
+            step: Some(1),
+            plane_covariance: [0.0; 16],
+            footing: Footing::TiltUnknown,
+            pixels: 300,
+        });
+        assert_eq!(map_polygon_of(&p).map(|q| (q.footing, q.pixels)), Some((Footing::TiltUnknown, 300)));
+        p.steppable = true;
+        assert!(map_polygon_of(&p).is_none(), "steppable with footing tilt_unknown");
+        (p.steppable, p.footing) = (false, 9);
+        assert!(map_polygon_of(&p).is_none(), "an unknown footing");
     }
 }
