@@ -97,7 +97,8 @@ fn a_bag_of_the_mock_stairs_replays_to_the_sequence_s_map() {
         let n = seq.len();
         assert!(stdout.contains(&format!("{n} depth images: {n} mapped")), "{compression}: {stdout}");
         let (worst_iou, worst_height) = against(&out, &truth, &seq, compression);
-        assert!(worst_iou <= 0.02 && worst_height <= 0.002, "{compression}: IOU {worst_iou}, height {worst_height} m");
+        // Millimetre rounding moves the odd tread's outline by a few percent of its IOU.
+        assert!(worst_iou <= 0.03 && worst_height <= 0.002, "{compression}: IOU {worst_iou}, height {worst_height} m");
     }
 }
 

@@ -208,7 +208,7 @@ pub fn level_held_back(held: &[HeldBack], t_world_camera: &Isometry3<f64>) -> Ve
         .collect()
 }
 
-/// How many level polygons a rule took out, and their area, m^2.
+/// How many level polygons a rule marked or held back, and their area, m^2.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
 pub struct PolygonCount {
     pub polygons: usize,
@@ -234,6 +234,7 @@ pub struct LevelSummary {
     pub no_plane: PolygonCount,
 }
 
+/// Tilts of a set of level polygons, degrees: mean, 99th percentile (nearest rank), worst.
 #[derive(Clone, Debug, Serialize)]
 pub struct TiltSummary {
     pub polygons: usize,

@@ -246,8 +246,8 @@ pub fn build_polygons(
                     // and a share of a bend beyond noise, towards the cut's normal.
                     let bend = BEND_LEAN_SHARE * h.bend_beyond_noise_rad();
                     let bend_lean = u.axes.map(|e| bend * cut.across.dot(&Vector3::from(e)));
-                    let noise_lean = noise_lean(&sample.points, fit, dist, &u);
-                    p.uncertainty = u.with_lean(noise_lean).with_lean(bend_lean);
+                    let ray_lean = noise_lean(&sample.points, fit, dist, &u);
+                    p.uncertainty = u.with_lean(ray_lean).with_lean(bend_lean);
                     p.footing = footing(&p.uncertainty, p.pixel_count);
                     Ok(())
                 }
