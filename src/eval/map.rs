@@ -9,7 +9,7 @@
 use nalgebra::{Isometry3, Point3};
 use serde::Serialize;
 
-use super::{mean_std, min_visible_pixels, treads};
+use super::{mean_std, min_visible_pixels, treads, world_tilt_deg};
 use crate::extract::Footing;
 use crate::map::{MapPolygon, MapSnapshot};
 use crate::ring::fill_rings;
@@ -187,7 +187,7 @@ pub fn score_map_seen_in(
             over_m2,
             under_m2,
             polygon: polygon.map(|p| p.id),
-            alpha_deg: polygon.filter(|_| found).map(|p| p.normal[2].abs().clamp(0.0, 1.0).acos().to_degrees()),
+            alpha_deg: polygon.filter(|_| found).map(|p| world_tilt_deg(p.normal)),
             height,
             height_error: height.map(|z| (z - t.height).abs()),
             footing: polygon.filter(|_| found).map(|p| p.footing),
@@ -212,9 +212,11 @@ pub fn summarise(scores: &[MapTreadScore], map: &MapSnapshot, seq: &Sequence) ->
     let steppable: Vec<&MapTreadScore> =
         scores.iter().filter(|s| s.footing.is_some_and(Footing::is_steppable)).collect();
     let level: Vec<(&MapPolygon, f64)> = (map.polygons.iter())
-        .map(|p| (p, p.normal[2].abs().min(1.0).acos().to_degrees()))
+        .map(|p| (p, world_tilt_deg(p.normal)))
         .filter(|(p, tilt)| p.area >= super::LEVEL_MIN_AREA_M2 && *tilt <= super::LEVEL_WITHIN_DEG)
         .collect();
+    let steppable_level_tilts: Vec<f64> =
+        level.iter().filter(|(p, _)| p.footing.is_steppable()).map(|(_, tilt)| *tilt).collect();
     MapSummary {
         treads_seen: scores.len(),
         treads_found: scores.iter().filter(|s| s.found).count(),
@@ -230,10 +232,7 @@ pub fn summarise(scores: &[MapTreadScore], map: &MapSnapshot, seq: &Sequence) ->
         treads_steppable: steppable.len(),
         steppable_tread_alpha_max_deg: steppable.iter().filter_map(|s| s.alpha_deg).fold(f64::NAN, f64::max),
         level_polygons: level.len(),
-        level_steppable: level.iter().filter(|(p, _)| p.footing.is_steppable()).count(),
-        level_steppable_tilt_max_deg: (level.iter())
-            .filter(|(p, _)| p.footing.is_steppable())
-            .map(|(_, tilt)| *tilt)
-            .fold(f64::NAN, f64::max),
+        level_steppable: steppable_level_tilts.len(),
+        level_steppable_tilt_max_deg: steppable_level_tilts.iter().copied().fold(f64::NAN, f64::max),
     }
 }

@@ -181,9 +181,14 @@ pub struct LevelTilt {
     pub footing: Footing,
 }
 
+/// The angle of a world-frame unit normal from the vertical, either way up, degrees.
+pub(crate) fn world_tilt_deg(normal: [f64; 3]) -> f64 {
+    normal[2].abs().min(1.0).acos().to_degrees()
+}
+
 /// The angle of a camera-frame normal from the world's vertical, either way up, degrees.
 fn tilt_from_level_deg(normal: [f64; 3], t_world_camera: &Isometry3<f64>) -> f64 {
-    (t_world_camera.rotation * nalgebra::Vector3::from(normal)).z.abs().min(1.0).acos().to_degrees()
+    world_tilt_deg((t_world_camera.rotation * nalgebra::Vector3::from(normal)).into())
 }
 
 /// The level polygons of one frame (`polygons` in the camera frame, `t_world_camera` its pose).
