@@ -7,7 +7,8 @@
 //! - An intruder with a certificate of the CA but no role may connect, and do nothing: its
 //!   odometry (poses 123 m up) never reaches anyone, its queryable on the
 //!   foothold service never sees a query, and the planner gets the mapper's answer only.
-//! - VINS, polymap and the planner do their jobs through the router.
+//! - VINS, polymap and the planner do their jobs through the router, which starts after
+//!   polymap: polymap waits for it.
 
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -73,6 +74,15 @@ fn shipped(name: &str, as_name: &str, tls: &Path, port: u16) -> std::path::PathB
     path
 }
 
+/// Blocks until something accepts TCP connections on loopback port `port`.
+fn wait_for_listener(port: u16, within: Duration) {
+    let started = std::time::Instant::now();
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(started.elapsed() < within, "nothing listens on port {port} after {within:?}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
 async fn open(config: &Path) -> Result<zenoh::Session, polymap::ros2::Ros2Error> {
     polymap::ros2::session::open(polymap::ros2::session::config(config).unwrap()).await
 }
@@ -91,14 +101,6 @@ async fn only_authenticated_authorised_peers_reach_polymap() {
     let port = polymap::ros2::session::free_loopback_port().unwrap();
 
     let bin = env!("CARGO_BIN_EXE_polymap");
-    let mut router = Command::new(bin)
-        .args(["router", "--duration", "60", "--config"])
-        .arg(shipped("router", "router", tls, port))
-        .stdout(Stdio::null())
-        .stderr(std::fs::File::create(tls.join("router.log")).unwrap())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(Duration::from_secs(1));
     let mapper_config = tls.join("mapper.toml");
     std::fs::write(
         &mapper_config,
@@ -116,6 +118,16 @@ async fn only_authenticated_authorised_peers_reach_polymap() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
+    // The router comes up after polymap, as it may at boot: polymap waits for it.
+    std::thread::sleep(Duration::from_millis(1500));
+    let mut router = Command::new(bin)
+        .args(["router", "--duration", "60", "--config"])
+        .arg(shipped("router", "router", tls, port))
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(tls.join("router.log")).unwrap())
+        .spawn()
+        .unwrap();
+    wait_for_listener(port, Duration::from_secs(20));
     let vins_config = tls.join("vins.toml");
     std::fs::write(
         &vins_config,
@@ -225,7 +237,7 @@ async fn only_authenticated_authorised_peers_reach_polymap() {
     }
 
     let get_map = planner.client(&interface.get_map).await.unwrap();
-    let map = get_map.call(&Default::default(), Duration::from_secs(5)).await.expect("the planner gets the map").map;
+    let map = get_map.call(&Default::default(), Duration::from_secs(5)).await;
 
     let out = tokio::task::spawn_blocking(move || {
         let _ = Command::new("kill").args(["-TERM", &mapper.id().to_string()]).status();
@@ -238,6 +250,11 @@ async fn only_authenticated_authorised_peers_reach_polymap() {
     let _ = router.kill();
     let _ = (vins.wait(), router.wait());
     let stderr = String::from_utf8_lossy(&out.stderr);
+    let router_log = std::fs::read_to_string(tls.join("router.log")).unwrap_or_default();
+    let map = match map {
+        Ok(reply) => reply.map,
+        Err(e) => panic!("the planner gets no map: {e}\npolymap's stderr:\n{stderr}\nthe router's:\n{router_log}"),
+    };
 
     assert!(updates.load(Ordering::Relaxed) >= 10, "the planner gets the map updates: {stderr}");
     assert!(real_poses.load(Ordering::Relaxed) >= 200, "the planner sees VINS's odometry");

@@ -327,8 +327,13 @@ impl<S: RosService> Client<S> {
             let sequence_number = self.seq.fetch_add(1, Ordering::Relaxed);
             get = get.attachment(Attachment { sequence_number, source_timestamp_ns: now_ns(), gid }.to_bytes());
         }
+        let asked = std::time::Instant::now();
         let replies = get.await.map_err(|e| fail(e.to_string()))?;
-        let reply = replies.recv_async().await.map_err(|_| fail(format!("no reply within {timeout:?}")))?;
+        // The replies end at once when no server is known, else at the timeout.
+        let reply = replies.recv_async().await.map_err(|_| match asked.elapsed() < timeout {
+            true => fail("no server of it is reachable".into()),
+            false => fail(format!("no reply within {timeout:?}")),
+        })?;
         match reply.result() {
             Ok(sample) => Ok(cdr::from_slice(&sample.payload().to_bytes())?),
             Err(e) => Err(fail(format!("refused: {}", String::from_utf8_lossy(&e.payload().to_bytes())))),
