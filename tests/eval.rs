@@ -2,7 +2,7 @@
 //! REFERENCE.md as `polymap eval` computes them.
 
 use polymap::config::PipelineConfig;
-use polymap::eval::{level_tilts, min_visible_pixels, score_frame, summarise, summarise_level};
+use polymap::eval::{FOOT_WIDTH_M, level_tilts, min_visible_pixels, score_frame, summarise, summarise_level};
 use polymap::extract::extract_cpu;
 use polymap::sequence::Sequence;
 
@@ -119,6 +119,25 @@ fn the_small_objects_config_segments_the_real_abw_blocks_into_their_faces() {
     assert!(angles.len() >= 200 && angles[angles.len() / 2] < 0.5, "{:?}", &angles[angles.len() / 2..]);
 }
 
+/// How deep a tread's visible part is, from the truth alone: about its going on frames
+/// that see it whole (a spread-based depth: an uneven visible shape, a dropout in the middle
+/// of it, reads a few percent deeper), and a strip where the image's edge cuts it.
+#[test]
+fn a_tread_s_visible_depth_is_at_most_its_going_and_all_of_it_when_seen_whole() {
+    let seq = Sequence::open("mock_frames/straight_320").unwrap();
+    let truth = seq.truth.as_ref().unwrap();
+    let going = truth.stair.as_ref().unwrap().going;
+    let mut depths = Vec::new();
+    for k in 0..seq.len() {
+        let scores = score_frame(k, &[], &seq.poses[k].transform, &seq.labels(k).unwrap(), truth, &seq.intrinsics);
+        depths.extend(scores.iter().map(|s| s.visible_depth_m));
+    }
+    let (least, most) = depths.iter().fold((f64::MAX, 0.0f64), |(a, b), &d| (a.min(d), b.max(d)));
+    assert!(depths.len() >= 50, "{} treads scored", depths.len());
+    assert!(most <= going * 1.1 && most >= going * 0.95, "deepest {most:.3} m, going {going} m");
+    assert!(least < going / 2.0, "no tread cut by the image: shallowest {least:.3} m");
+}
+
 /// Every frame of every mock sequence: each tread with at least 1500 visible pixels at
 /// 320x240 (6000 at 640x480) is found, including the nearest one cut by the image's bottom
 /// edge, and no polygon published as a tread is tilted over 1 deg or off its height by
@@ -161,7 +180,8 @@ fn every_tread_in_clear_view_is_found_on_every_frame_and_none_is_tilted_over_a_d
 
 /// A walk no tuning saw (a spiral at 3.5 mm of noise, seed 32) whose published level
 /// polygons include some tilted past a degree: every one published as steppable, on every
-/// frame, is level to a degree, and the rule keeps nearly every large tread steppable.
+/// frame, is level to a degree; every large tread seen at least a foot's width deep is
+/// found and steppable, and what the rule marks are strips the image's edge cut narrower.
 #[test]
 fn on_an_unseen_walk_every_steppable_level_polygon_is_level_to_a_degree() {
     use polymap::synth::{SceneKind, SynthOptions, generate};
@@ -183,11 +203,20 @@ fn on_an_unseen_walk_every_steppable_level_polygon_is_level_to_a_degree() {
     assert!(worst(&summary.all) > 1.0, "the walk has polygons the rule must mark: {:?}", summary.all.worst);
     assert!(worst(&summary.steppable) <= 1.0, "{:?}", summary.steppable.worst);
     assert!(summary.tilt_unknown.polygons + summary.few_pixels.polygons >= 1);
-    let big: Vec<_> = scores.iter().filter(|t| t.visible_pixels >= 1500 && t.found).collect();
-    let steppable = big.iter().filter(|t| t.footing.is_some_and(|f| f.is_steppable())).count();
-    assert!(
-        big.len() > 100 && steppable * 100 >= big.len() * 95,
-        "{steppable} of {} large treads steppable",
-        big.len()
-    );
+    let steppable = |t: &&polymap::eval::TreadScore| t.footing.is_some_and(|f| f.is_steppable());
+    let (deep, strips): (Vec<_>, Vec<_>) =
+        scores.iter().filter(|t| t.visible_pixels >= 1500).partition(|t| t.visible_depth_m >= FOOT_WIDTH_M);
+    assert!(deep.len() > 100, "{} large treads", deep.len());
+    for t in &deep {
+        assert!(
+            steppable(t),
+            "frame {} tread {} ({} px, {:.3} m deep): {t:?}",
+            t.frame,
+            t.step,
+            t.visible_pixels,
+            t.visible_depth_m
+        );
+    }
+    let marked = strips.iter().filter(|t| t.found && !steppable(t)).count();
+    assert!(marked >= 3, "{marked} of {} strips marked", strips.len());
 }

@@ -121,13 +121,17 @@ pub fn evaluate(s: &Sequence, config: &Config, json: bool, debug: Option<&Path>)
         count(level.no_plane)
     );
     let big = eval::MIN_STEPPABLE_TREAD_PIXELS_320 * s.intrinsics.pixel_count() / (320 * 240);
-    let big_treads: Vec<&eval::TreadScore> = scores.iter().filter(|t| t.visible_pixels >= big).collect();
-    println!(
-        "treads with >= {big} visible pixels: {}, found {}, found and steppable {}",
-        big_treads.len(),
-        big_treads.iter().filter(|t| t.found).count(),
-        big_treads.iter().filter(|t| t.footing.is_some_and(|f| f.is_steppable())).count()
-    );
+    let (deep, strips): (Vec<&eval::TreadScore>, Vec<&eval::TreadScore>) =
+        scores.iter().filter(|t| t.visible_pixels >= big).partition(|t| t.visible_depth_m >= eval::FOOT_WIDTH_M);
+    for (treads, which) in [(deep, "at least"), (strips, "under")] {
+        println!(
+            "treads with >= {big} visible pixels, seen {which} {} m deep: {}, found {}, found and steppable {}",
+            eval::FOOT_WIDTH_M,
+            treads.len(),
+            treads.iter().filter(|t| t.found).count(),
+            treads.iter().filter(|t| t.footing.is_some_and(|f| f.is_steppable())).count()
+        );
+    }
     Ok(())
 }
 

@@ -28,6 +28,8 @@ pub struct TreadScore {
     /// Step index of the tread (the landing counts as the top step).
     pub step: u32,
     pub visible_pixels: usize,
+    /// How deep its visible part is across its narrowest direction, m (`visible_depth_m`).
+    pub visible_depth_m: f64,
     /// Whether a polygon covers it with IOU at least `FOUND_IOU`.
     pub found: bool,
     pub iou: f64,
@@ -42,9 +44,15 @@ pub struct TreadScore {
     pub footing: Option<Footing>,
 }
 
-/// A tread with this many visible pixels at 320x240 (scaled by image area for other sizes)
-/// must be found and steppable: the footing rule may not hide real treads.
+/// A tread with this many visible pixels at 320x240 (scaled by image area for other sizes),
+/// and a visible part at least `FOOT_WIDTH_M` deep, must be found and steppable: the
+/// footing rule may not hide real treads.
 pub const MIN_STEPPABLE_TREAD_PIXELS_320: usize = 1500;
+
+/// About a humanoid's foot width. A strip of tread seen narrower than this (cut by the
+/// image's edge) holds no foot across it, and its support is thin in one direction, which
+/// the footing rule may mark; the map has the whole tread from other frames.
+pub const FOOT_WIDTH_M: f64 = 0.10;
 
 /// A polygon counts as the tread when it overlaps it at least this much.
 pub const FOUND_IOU: f64 = 0.5;
@@ -75,11 +83,13 @@ pub fn score_frame(
         }
         let (k, iou) = best_match(&masks, labels, label);
         let found = iou >= FOUND_IOU;
+        let visible_depth_m = visible_depth_m(labels, label, t.height, t_world_camera, intr);
         let world = found.then(|| polygons[k].transformed(t_world_camera));
         scores.push(TreadScore {
             frame,
             step,
             visible_pixels,
+            visible_depth_m,
             found,
             iou,
             alpha_deg: world.as_ref().map(|p| p.normal[2].clamp(-1.0, 1.0).acos().to_degrees()),
@@ -89,6 +99,32 @@ pub fn score_frame(
         });
     }
     scores
+}
+
+/// How deep the part of a level tread at world height `height` that pixels labelled
+/// `label` see is, across its narrowest direction, m: the rectangle with the same spread,
+/// sqrt(12 x the smaller variance of where the pixels' rays meet the tread).
+fn visible_depth_m(labels: &[u16], label: u16, height: f64, t_world_camera: &Isometry3<f64>, intr: &Intrinsics) -> f64 {
+    let origin = t_world_camera.translation.vector;
+    let (mut n, mut sum, mut products) = (0.0, nalgebra::Vector2::zeros(), nalgebra::Matrix2::zeros());
+    for (i, _) in labels.iter().enumerate().filter(|&(_, &l)| l == label) {
+        let (u, v) = ((i % intr.width as usize) as f64, (i / intr.width as usize) as f64);
+        let ray = t_world_camera.rotation * intr.ray(u, v);
+        let along = (height - origin.z) / ray.z;
+        if !(along > 0.0 && along.is_finite()) {
+            continue;
+        }
+        let p = nalgebra::Vector2::new(origin.x + along * ray.x, origin.y + along * ray.y);
+        n += 1.0;
+        sum += p;
+        products += p * p.transpose();
+    }
+    if n < 2.0 {
+        return 0.0;
+    }
+    let mean = sum / n;
+    let spread = products / n - mean * mean.transpose();
+    (12.0 * spread.symmetric_eigenvalues().min().max(0.0)).sqrt()
 }
 
 /// A picture of how the treads were matched: green where polygon and tread agree, red
