@@ -107,9 +107,18 @@ pub fn loopback(listen: Option<u16>, connect: &[u16]) -> zenoh::Config {
     zenoh::Config::from_json5(&loopback_json5(listen, connect)).expect("Zenoh's own keys")
 }
 
-/// Opens a session with `config`.
+/// Opens a session with `config`. A client whose config says to wait for its router
+/// (`connect.timeout_ms = -1`) waits here: the log says for what.
 pub async fn open(config: zenoh::Config) -> Result<zenoh::Session, Ros2Error> {
-    zenoh::open(config).await.map_err(|e| Ros2Error::zenoh("opening the session", e))
+    let key = |k: &str| config.get_json(k).unwrap_or_default();
+    tracing::info!(
+        "Zenoh: opening a {} session, connecting to {}",
+        key("mode").trim_matches('"'),
+        key("connect/endpoints")
+    );
+    let session = zenoh::open(config).await.map_err(|e| Ros2Error::zenoh("opening the session", e))?;
+    tracing::info!("Zenoh: session {} open", session.zid());
+    Ok(session)
 }
 
 /// A TCP port on 127.0.0.1 that nothing listens on now.
