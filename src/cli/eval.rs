@@ -238,6 +238,10 @@ pub fn evaluate_segmentation(
         m.angle_error_max_deg,
         m.angle_pairs
     );
+    println!(
+        "missed {:.1} faces per image: {:.1} of them half covered or more by regions inside them (under-grown or broken up), the rest by none",
+        m.missed, m.missed_half_covered
+    );
     Ok(())
 }
 

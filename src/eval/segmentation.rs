@@ -143,6 +143,10 @@ pub struct HooverScore {
     /// Instances (one region each) of under-segmentation.
     pub under: usize,
     pub missed: usize,
+    /// Each missed face: the share of it that regions lying at T inside it cover (0 when
+    /// none does). Near T, the face was found but under-grown or broken up; near 0, no
+    /// region stood for it.
+    pub missed_cover: BTreeMap<u32, f64>,
     pub noise: usize,
     /// Per pair of touching faces both detected correctly: |truth angle - machine angle|.
     pub angle_errors: Vec<AngleError>,
@@ -218,8 +222,11 @@ pub fn hoover(
             score.under += 1;
         }
     }
-    for &n in face_size.keys() {
-        score.faces.entry(n).or_insert(Outcome::Missed);
+    for (&n, &size) in &face_size {
+        if *score.faces.entry(n).or_insert(Outcome::Missed) == Outcome::Missed {
+            let inside = overlap.iter().filter(|&(&(m, f), &o)| f == n && at(o, region_size[&m]));
+            score.missed_cover.insert(n, inside.map(|(_, &o)| o).sum::<usize>() as f64 / size as f64);
+        }
     }
     score.noise_regions = region_size.keys().filter(|m| !used_regions.contains(m)).copied().collect();
     score.missed = face_size.len() - used_faces.len();
@@ -284,6 +291,8 @@ pub struct HooverSummary {
     pub over: f64,
     pub under: f64,
     pub missed: f64,
+    /// Of the missed faces, those that regions lying inside them cover at least half of.
+    pub missed_half_covered: f64,
     pub noise: f64,
     pub correct_min: usize,
     pub angle_error_mean_deg: f64,
@@ -303,6 +312,7 @@ pub fn summarise(scores: &[HooverScore], tolerance: f64) -> HooverSummary {
         over: mean(|s| s.over),
         under: mean(|s| s.under),
         missed: mean(|s| s.missed),
+        missed_half_covered: mean(|s| s.missed_cover.values().filter(|&&c| c >= 0.5).count()),
         noise: mean(|s| s.noise),
         correct_min: scores.iter().map(|s| s.correct).min().unwrap_or(0),
         angle_error_mean_deg: super::mean_std(&angles).0,
@@ -406,8 +416,11 @@ mod tests {
             .collect();
         let s = hoover(&t, &m, &normals(&[]), 0.8);
         assert_eq!((s.correct, s.missed, s.noise), (1, 1, 1));
+        // Face 11's missing: region 2 lies inside it, covering a fifth.
+        assert_eq!(s.missed_cover, BTreeMap::from([(11, 0.2)]));
         let s = hoover(&t, &m, &normals(&[]), 0.81);
         assert_eq!((s.correct, s.missed, s.noise), (0, 2, 2));
+        assert_eq!(s.missed_cover, BTreeMap::from([(10, 0.8), (11, 0.2)]));
     }
 
     #[test]
