@@ -163,6 +163,14 @@ async fn only_authenticated_authorised_peers_reach_polymap() {
     let intruder_session =
         open(&shipped("planner", "intruder", tls, port)).await.expect("a certificate of the CA connects");
     let intruder = Node::new(&intruder_session, node_options("intruder")).await.unwrap();
+    // polymap answers through the router once its retries have found it (they back off to
+    // 4 s apart).
+    let get_map = planner.client(&interface.get_map).await.unwrap();
+    let started = std::time::Instant::now();
+    while let Err(e) = get_map.call(&Default::default(), Duration::from_secs(2)).await {
+        assert!(started.elapsed() < Duration::from_secs(30), "polymap never answered through the router: {e}");
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
 
     // What the planner sees: map updates, and the odometry (real: z under 10 m; the
     // intruder's phantom: z = 123 m).
@@ -236,7 +244,6 @@ async fn only_authenticated_authorised_peers_reach_polymap() {
         answers.push(cdr::from_slice::<GetFootholdResponse>(&sample.payload().to_bytes()).unwrap().foothold);
     }
 
-    let get_map = planner.client(&interface.get_map).await.unwrap();
     let map = get_map.call(&Default::default(), Duration::from_secs(5)).await;
 
     let out = tokio::task::spawn_blocking(move || {
