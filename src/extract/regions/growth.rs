@@ -5,7 +5,7 @@
 
 use rayon::prelude::*;
 
-use super::{MIN_BLOCK_ROWS, Segmentation, bounding_box};
+use super::{MIN_BLOCK_ROWS, Segmentation};
 use crate::extract::Grid;
 use crate::extract::cloud::Cloud;
 use crate::extract::cpu::ransac::PlaneFit;
@@ -14,8 +14,9 @@ use crate::grid::{par_rows, rows_around};
 impl Segmentation {
     /// Grows every region with an accepted fit (`accepted[r]`) into unlabelled pixels,
     /// `waves` pixels deep. A pixel belongs to the plane nearest to its raw 3-D point
-    /// among the accepted regions around it (if within `dist`), and joins that region
-    /// once the region has reached it (a 4-neighbour). Nearest among the regions around,
+    /// among the accepted regions around it (if within `dist`; around: with a pixel within
+    /// `waves` pixels, in whole cells, `NearbyRegions`), and joins that region once the
+    /// region has reached it (a 4-neighbour). Nearest among the regions around,
     /// not just those already touching: at a tread's inner corner the riser's lowest
     /// centimetre lies within `dist` of the tread's plane, and the tread would take it
     /// before the riser got there. A pixel joins at wave k when, after wave k - 1, a
@@ -24,7 +25,7 @@ impl Segmentation {
     /// pixel (`plane_image`), and the waves are then byte masks of whole rows (`join_waves`).
     pub fn grow(&mut self, fits: &[Option<PlaneFit>], accepted: &[bool], cloud: &Cloud, dist: f32, waves: u32) {
         if waves > 0 {
-            let nearby = NearbyRegions::new(self, accepted, (NEARBY_PER_WAVE * waves) as usize);
+            let nearby = NearbyRegions::new(self, accepted, waves as usize);
             let planes = plane_image(&self.labels, &nearby, fits, cloud, dist);
             join_waves(&mut self.labels, &planes, waves);
         }
@@ -220,17 +221,16 @@ fn wave_row_portable([above, row, below]: [&[u8]; 3], links: &[u8], out: &mut [u
     out.iter().zip(row).fold(false, |any, (&o, &x)| any | (o != x))
 }
 
-/// How far around a region, per wave of growth, its plane competes for pixels: far
-/// enough to cover the edge band between two regions even where neither can grow
-/// across all of it.
-pub(super) const NEARBY_PER_WAVE: u32 = 4;
-
 /// Side of the square cells of `NearbyRegions`, pixels.
 pub(super) const CELL_PX: usize = 16;
 
-/// For each CELL_PX square of the image, the accepted regions whose bounding box,
-/// widened by a margin, overlaps it: the planes a pixel there may belong to. One list of
-/// labels, cell after cell (a list per cell was hundreds of small allocations a frame).
+/// For each CELL_PX square of the image, the accepted regions that hold a pixel within
+/// a margin of it, rounded up to whole cells: the planes a pixel there may belong to.
+/// Near the region's pixels, not its bounding box: the box of a large or bent region
+/// (the floor around a box, an L-shaped face) covers faces it never reaches, and its
+/// plane, nearest along the line where it cuts them, kept their own regions from growing
+/// across that line. One list of labels, cell after cell (a list per cell was hundreds of
+/// small allocations a frame).
 pub(super) struct NearbyRegions {
     cells_w: usize,
     /// Cell c's labels are `labels[starts[c]..starts[c + 1]]`, ascending.
@@ -242,34 +242,57 @@ impl NearbyRegions {
     pub(super) fn new(seg: &Segmentation, accepted: &[bool], margin: usize) -> NearbyRegions {
         let (w, h) = (seg.labels.width, seg.labels.height);
         let (cells_w, cells_h) = (w.div_ceil(CELL_PX), h.div_ceil(CELL_PX));
-        // Each accepted region's label and the cells its widened box covers.
-        let boxes: Vec<(u32, [usize; 4])> = (seg.pixels.iter().enumerate())
-            .filter(|&(r, pixels)| accepted[r] && !pixels.is_empty())
-            .map(|(r, pixels)| {
-                let [u0, v0, u1, v1] = bounding_box(pixels, w);
-                let (u0, v0) = (u0.saturating_sub(margin) / CELL_PX, v0.saturating_sub(margin) / CELL_PX);
-                let (u1, v1) = ((u1 + margin).min(w - 1) / CELL_PX, (v1 + margin).min(h - 1) / CELL_PX);
-                (r as u32 + 1, [u0, v0, u1, v1])
-            })
-            .collect();
-        let cells =
-            |[u0, v0, u1, v1]: [usize; 4]| (v0..=v1).flat_map(move |cv| (cv * cells_w + u0)..=(cv * cells_w + u1));
-        let mut starts = vec![0u32; cells_w * cells_h + 1];
-        for &(_, cell_box) in &boxes {
-            for c in cells(cell_box) {
-                starts[c + 1] += 1;
+        let reach = margin.div_ceil(CELL_PX);
+        // (cell, label) for every cell within `reach` cells of a cell holding a pixel of an
+        // accepted region; each pair once (`seen` holds the last label that marked a cell).
+        let (mut held, mut seen) = (vec![0u32; cells_w * cells_h], vec![0u32; cells_w * cells_h]);
+        let mut pairs: Vec<(u32, u32)> = Vec::new();
+        for (r, pixels) in seg.pixels.iter().enumerate().filter(|&(r, p)| accepted[r] && !p.is_empty()) {
+            let label = r as u32 + 1;
+            let mut own = Vec::new();
+            // The pixels ascend: row by row, and along a row a cell at a time where the
+            // region runs unbroken to the cell's end (most of it), a pixel at a time where not.
+            let (mut v, mut k) = (pixels[0] as usize / w, 0);
+            while let Some(&i) = pixels.get(k) {
+                let i = i as usize;
+                while i >= (v + 1) * w {
+                    v += 1;
+                }
+                let u = i - v * w;
+                let c = (v / CELL_PX) * cells_w + u / CELL_PX;
+                if held[c] != label {
+                    held[c] = label;
+                    own.push(c);
+                }
+                let to_cell_end = ((u / CELL_PX + 1) * CELL_PX).min(w) - u;
+                let unbroken = pixels.get(k + to_cell_end - 1).is_some_and(|&j| j as usize == i + to_cell_end - 1);
+                k += if unbroken { to_cell_end } else { 1 };
             }
+            for c in own {
+                let (cu, cv) = (c % cells_w, c / cells_w);
+                for nv in cv.saturating_sub(reach)..=(cv + reach).min(cells_h - 1) {
+                    for nu in cu.saturating_sub(reach)..=(cu + reach).min(cells_w - 1) {
+                        let n = nv * cells_w + nu;
+                        if seen[n] != label {
+                            seen[n] = label;
+                            pairs.push((n as u32, label));
+                        }
+                    }
+                }
+            }
+        }
+        // Cell by cell, each cell's labels in the order they came: ascending.
+        let mut starts = vec![0u32; cells_w * cells_h + 1];
+        for &(c, _) in &pairs {
+            starts[c as usize + 1] += 1;
         }
         for c in 1..starts.len() {
             starts[c] += starts[c - 1];
         }
-        let mut next = starts.clone();
-        let mut labels = vec![0u32; starts[starts.len() - 1] as usize];
-        for &(label, cell_box) in &boxes {
-            for c in cells(cell_box) {
-                labels[next[c] as usize] = label;
-                next[c] += 1;
-            }
+        let (mut next, mut labels) = (starts.clone(), vec![0u32; pairs.len()]);
+        for (c, label) in pairs {
+            labels[next[c as usize] as usize] = label;
+            next[c as usize] += 1;
         }
         NearbyRegions { cells_w, starts, labels }
     }

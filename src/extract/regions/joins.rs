@@ -59,7 +59,8 @@ impl Segmentation {
     /// pixels tall, and every dropout's spoiled square of normals cuts it through), into
     /// pieces each too small to keep. Two regions join when they touch across at most
     /// `JOIN_GAP_PX` with no depth step (`candidates`, found on the labels as they are
-    /// now), their planes are within `JOIN_ANGLE_COS`, and their union is still one plane:
+    /// now), their planes are within `JOIN_ANGLE_COS` or the smaller piece lies on the
+    /// larger one's plane (as for the union below), and their union is still one plane:
     /// refitted, at least `min_ratio` of each one's points within `dist` of it. The region
     /// joined into keeps the lower index; the other is left empty, its fit None. Returns
     /// how many joins were made.
@@ -71,6 +72,8 @@ impl Segmentation {
         dist: f32,
         min_ratio: f64,
     ) -> usize {
+        // Enough of a piece's points on a plane to call the piece part of it.
+        let enough = |points: usize| (min_ratio * points as f64).ceil() as usize;
         let mut joins = 0;
         let mut joined_into = vec![false; self.pixels.len()];
         // Where each region went: itself, or the region it was joined into (a chain).
@@ -87,20 +90,26 @@ impl Segmentation {
             let (a, b) = (find(&now_in, a as usize - 1), find(&now_in, b as usize - 1));
             let (a, b) = (a.min(b), a.max(b));
             let (Some(fa), Some(fb)) = (fits[a], fits[b]) else { continue };
-            if a == b || n < MIN_CREASE_STEPS || fa.normal.dot(&fb.normal) < JOIN_ANGLE_COS {
+            if a == b || n < MIN_CREASE_STEPS {
                 continue;
+            }
+            let on = |fit: &PlaneFit, pts: &[[f32; 3]]| support(pts, fit.normal.into(), fit.offset, dist as f64).0;
+            let (start, smaller) = if fa.points >= fb.points { (fa, b) } else { (fb, a) };
+            // Planes apart, unless the smaller piece lies on the larger one's plane: a strip
+            // a few pixels wide (between the stripes of a structured-light scanner, say)
+            // has a plane of its own that says little. A sample of it tells.
+            if fa.normal.dot(&fb.normal) < JOIN_ANGLE_COS {
+                let small = self.sampled_points(&[smaller], cloud, JOIN_SAMPLE_POINTS).points;
+                if on(&start, &small) < enough(small.len()) {
+                    continue;
+                }
             }
             let both = self.points(&[a, b], cloud);
             let (na, pts) = (both.ranges[0].len(), both.points);
-            let start = if fa.points >= fb.points { fa } else { fb };
             let Some(joined) = refit(&pts, start.normal_f32(), start.offset as f32, dist) else { continue };
             // Each piece on the joined plane, not just their sum: a large region would
             // otherwise swallow a small piece of a neighbouring surface within its outliers.
-            let nb = pts.len() - na;
-            let on_plane = |pts: &[[f32; 3]]| support(pts, joined.normal.into(), joined.offset, dist as f64).0;
-            if on_plane(&pts[..na]) < (min_ratio * na as f64).ceil() as usize
-                || on_plane(&pts[na..]) < (min_ratio * nb as f64).ceil() as usize
-            {
+            if on(&joined, &pts[..na]) < enough(na) || on(&joined, &pts[na..]) < enough(pts.len() - na) {
                 continue;
             }
             let moved = std::mem::take(&mut self.pixels[b]);
@@ -212,3 +221,6 @@ pub(super) const JOIN_GAP_PX: usize = 12;
 /// (the nearest tread of mock_frames/straight_320 frame 26); the refit of their union,
 /// which each piece must lie on, is what decides.
 pub(super) const JOIN_ANGLE_COS: f64 = 0.985;
+/// Points of the smaller piece whose planes are further apart than that, checked on the
+/// larger one's plane before the union is fitted (a riser's piece fails on its first few).
+const JOIN_SAMPLE_POINTS: usize = 256;

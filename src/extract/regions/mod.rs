@@ -80,8 +80,19 @@ pub fn segment_and_fit(
     times.ransac += lap();
     let candidates = if leaks.split.is_empty() { candidates } else { seg.join_candidates(cloud, ratio) };
     seg.join_coplanar(candidates, &mut fits, cloud, dist, min_ratio);
-    let accepted: Vec<bool> = fits.iter().map(|f| f.is_some_and(|f| f.inlier_ratio() >= min_ratio)).collect();
+    let accepted_of = |fits: &[Option<PlaneFit>]| -> Vec<bool> {
+        fits.iter().map(|f| f.is_some_and(|f| f.inlier_ratio() >= min_ratio)).collect()
+    };
+    let mut accepted = accepted_of(&fits);
     seg.grow(&fits, &accepted, cloud, dist, cfg.region_grow_px);
+    // Growth narrows the bands between pieces of one plane to within a join's reach where
+    // they were wider (a scanner's stripe of bad depth across a face): join once more, and
+    // grow what joined.
+    let candidates = seg.join_candidates(cloud, ratio);
+    if seg.join_coplanar(candidates, &mut fits, cloud, dist, min_ratio) > 0 {
+        accepted = accepted_of(&fits);
+        seg.grow(&fits, &accepted, cloud, dist, cfg.region_grow_px);
+    }
     // Three jobs that only read the grown regions, side by side: each is a few tenths of a
     // millisecond that its own parallel loop, held up by the largest region, barely splits.
     let ((mut points, creases), mut regions) = rayon::join(

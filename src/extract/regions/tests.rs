@@ -6,6 +6,7 @@ use super::*;
 use crate::extract::cpu::components::{components_oracle, dense_from_roots};
 use crate::extract::cpu::ransac::hash;
 use crate::grid::{for_each_set, rows_around};
+use nalgebra::{Rotation3, Vector3};
 
 #[test]
 fn regions_from_roots_are_the_densely_numbered_components() {
@@ -60,7 +61,7 @@ fn nearest_plane(
 fn grow_by_sweeps(seg: &Segmentation, fits: &[Option<PlaneFit>], cloud: &Cloud, dist: f32, waves: u32) -> Vec<u32> {
     let (w, h) = (seg.labels.width, seg.labels.height);
     let accepted = vec![true; fits.len()];
-    let nearby = NearbyRegions::new(seg, &accepted, (NEARBY_PER_WAVE * waves) as usize);
+    let nearby = NearbyRegions::new(seg, &accepted, waves as usize);
     let mut labels = seg.labels.data.clone();
     for _ in 0..waves {
         let before = labels.clone();
@@ -435,4 +436,131 @@ fn row_scans_are_the_pixel_by_pixel_ones() {
     let mut set = Vec::new();
     for_each_set(&[0, 3, 0, 0, 0, 0, 0, 255, 9, 0, 128], |i| set.push(i));
     assert_eq!(set, [1, 7, 8, 10]);
+}
+
+/// `NearbyRegions` as its definition says it: an accepted region is around pixel (u, v) when
+/// it holds a pixel in a cell at most margin / CELL_PX (rounded up) cells from the pixel's,
+/// across and down; the labels ascend. Regions of every shape: an L whose box covers the
+/// image, specks, a block, a run across a row's end into the next cell row, one not
+/// accepted; an image of partial cells; margins within a cell and beyond.
+#[test]
+fn the_regions_around_a_pixel_are_those_with_a_pixel_a_cell_or_so_away() {
+    let (w, h) = (100usize, 75usize);
+    let label = |i: usize| {
+        let (u, v) = (i % w, i / w);
+        if v < 3 || (u < 3 && v > 40) {
+            1
+        } else if (31 * w + 96..32 * w + 12).contains(&i) {
+            2
+        } else if (40..50).contains(&u) && (20..28).contains(&v) {
+            3
+        } else if u > 60 && v > 50 && hash(i as u32).is_multiple_of(9) {
+            4
+        } else if (70..80).contains(&u) && (5..9).contains(&v) {
+            5
+        } else {
+            0
+        }
+    };
+    let data: Vec<u32> = (0..w * h).map(label).collect();
+    let pixels = (1..=5).map(|l| (0..w * h).filter(|&i| data[i] == l).map(|i| i as u32).collect()).collect();
+    let seg = Segmentation { labels: Grid { width: w, height: h, data }, pixels };
+    let accepted = [true, true, true, true, false];
+    for margin in [1, 16, 17, 40] {
+        let nearby = NearbyRegions::new(&seg, &accepted, margin);
+        let reach = margin.div_ceil(CELL_PX);
+        let cell = |i: usize| ((i % w / CELL_PX) as isize, (i / w / CELL_PX) as isize);
+        for i in 0..w * h {
+            let (cu, cv) = cell(i);
+            let want: Vec<u32> = (1..=5u32)
+                .filter(|&l| accepted[l as usize - 1])
+                .filter(|&l| {
+                    seg.pixels[l as usize - 1].iter().any(|&j| {
+                        let (ju, jv) = cell(j as usize);
+                        (ju - cu).unsigned_abs() <= reach && (jv - cv).unsigned_abs() <= reach
+                    })
+                })
+                .collect();
+            assert_eq!(nearby.around(i % w, i / w), want, "margin {margin}, pixel ({}, {})", i % w, i / w);
+        }
+    }
+}
+
+/// A region's plane competes for pixels only near the region: a wall seen square-on, an
+/// L-shaped region along two edges whose plane is the wall's exactly (nearest to every
+/// point) and a square far from it whose plane is off by a fraction of the inlier
+/// distance. The square grows its full waves; with the L's plane competing everywhere its
+/// box reaches (as it once did), the square took nothing.
+#[test]
+fn a_far_region_s_plane_does_not_stop_a_region_growing_where_it_cannot_reach() {
+    let (w, h, waves) = (128usize, 128usize, 4u32);
+    let depth = Grid { width: w, height: h, data: vec![1.0f32; w * h] };
+    let intr = centred_camera(w, h, 100.0);
+    let cloud = Cloud::new(&depth, &intr);
+    let in_square = |u: usize, v: usize| (90..110).contains(&u) && (90..110).contains(&v);
+    let data: Vec<u32> = (0..w * h)
+        .map(|i| match (i % w, i / w) {
+            (u, v) if u < 4 || v < 4 => 1,
+            (u, v) if in_square(u, v) => 2,
+            _ => 0,
+        })
+        .collect();
+    let pixels = (1..=2).map(|l| (0..w * h).filter(|&i| data[i] == l).map(|i| i as u32).collect()).collect();
+    let mut seg = Segmentation { labels: Grid { width: w, height: h, data }, pixels };
+    let plane =
+        |normal: Vector3<f64>| PlaneFit { normal: normal.normalize(), offset: -1.0, inliers: 1, points: 1, rms: 0.0 };
+    let fits = [Some(plane(Vector3::z())), Some(plane(Vector3::new(0.001, 0.0, 1.0)))];
+    seg.grow(&fits, &[true, true], &cloud, 0.003, waves);
+    // Manhattan distance from the square.
+    let from_square = |u: usize, v: usize| u.abs_diff(u.clamp(90, 109)) + v.abs_diff(v.clamp(90, 109));
+    for (i, &l) in seg.labels.data.iter().enumerate() {
+        let (u, v) = (i % w, i / w);
+        let want_square = from_square(u, v) <= waves as usize;
+        assert_eq!(l == 2, want_square, "pixel ({u}, {v}): label {l}");
+    }
+}
+
+/// Pieces of one face cut apart by stripes a few pixels wide (a structured-light scanner's
+/// bands of bad depth leave such strips between edges), each strip fitted a plane of its own
+/// that is far off the face's: the strips lie on the face's plane, so they join it, and the
+/// face becomes one region; a real face beside it (a riser at a right angle) does not join.
+#[test]
+fn strips_on_a_face_s_plane_join_it_whatever_their_own_fits_say() {
+    let (w, h) = (80usize, 40usize);
+    let intr = centred_camera(w, h, 60.0);
+    // The face: 1/depth linear in the pixel, left of u = 60; the riser beyond, at depth 1 / 0.9.
+    let inverse_depth =
+        |u: usize, v: usize| if u < 60 { 0.9 + 0.002 * (60.0 - u as f32) + 0.001 * v as f32 } else { 0.9 };
+    let depth = Grid { width: w, height: h, data: (0..w * h).map(|i| 1.0 / inverse_depth(i % w, i / w)).collect() };
+    let cloud = Cloud::new(&depth, &intr);
+    // Regions: the face's left part (u < 30), strips 3 px wide with 1-px edges between them
+    // up to u = 44, the face's right part to u = 58, the riser from u = 61.
+    let region = |u: usize| match u {
+        0..30 => 1,
+        30..45 if (u - 30) % 4 != 3 => 2 + (u - 30) as u32 / 4,
+        45..58 => 6,
+        61.. => 7,
+        _ => 0,
+    };
+    let data: Vec<u32> = (0..w * h).map(|i| region(i % w)).collect();
+    let pixels = (1..=7).map(|l| (0..w * h).filter(|&i| data[i] == l).map(|i| i as u32).collect()).collect();
+    let mut seg = Segmentation { labels: Grid { width: w, height: h, data }, pixels };
+    let all: Vec<usize> = (0..7).collect();
+    let mut fits = super::super::cpu::ransac::fit_planes(&seg.points(&all, &cloud), 32, 0.003);
+    // The strips' own planes, as narrow fits on noisy depth come out: 30 deg off the face's.
+    let face = fits[0].unwrap().normal;
+    let tilted = (Rotation3::new(Vector3::y() * 30f64.to_radians()) * face).normalize();
+    for f in &mut fits[1..5] {
+        let f = f.as_mut().unwrap();
+        let p = seg.points(&[0], &cloud).points[0];
+        f.normal = tilted;
+        f.offset = -tilted.dot(&Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64));
+    }
+    assert!(fits[1].unwrap().normal.dot(&face) < JOIN_ANGLE_COS);
+    let candidates = seg.join_candidates(&cloud, 0.03);
+    let joins = seg.join_coplanar(candidates, &mut fits, &cloud, 0.003, 0.9);
+    assert_eq!(joins, 5, "the four strips and the face's right part join its left part");
+    let face_pixels = (0..w * h).filter(|&i| i % w < 58 && region(i % w) != 0).count();
+    assert!(seg.pixels[0].len() >= face_pixels, "{} of {face_pixels}", seg.pixels[0].len());
+    assert!(fits[6].is_some() && seg.pixels[6].len() == 19 * h, "the riser stays its own region");
 }
