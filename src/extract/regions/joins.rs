@@ -221,6 +221,7 @@ pub(super) const JOIN_GAP_PX: usize = 12;
 /// (the nearest tread of mock_frames/straight_320 frame 26); the refit of their union,
 /// which each piece must lie on, is what decides.
 pub(super) const JOIN_ANGLE_COS: f64 = 0.985;
-/// Points of the smaller piece whose planes are further apart than that, checked on the
-/// larger one's plane before the union is fitted (a riser's piece fails on its first few).
+/// Where two pieces' planes are further apart than `JOIN_ANGLE_COS`, this many of the
+/// smaller piece's points (every k-th pixel's) are checked on the larger one's plane
+/// before their union is fitted: a riser's piece fails there, cheaply.
 const JOIN_SAMPLE_POINTS: usize = 256;

@@ -5,8 +5,10 @@
 //! - `fits`: the points a region's plane is fitted on, and the sample the polygon checks read;
 //! - `leaks`: a region whose plane fits too few of its points is cut back to the plane's
 //!   largest patch, the rest fitted again as new regions;
-//! - `joins`: pieces of one plane cut apart by dropouts joined; creases between regions;
-//! - `growth`: regions take back the border band the edges ate, onto their planes;
+//! - `joins`: pieces of one plane cut apart by dropouts or stripes joined; creases between
+//!   regions;
+//! - `growth`: regions take back the border band the edges ate, onto their planes (then
+//!   the joins once more, and growth again where they joined);
 //! - `scan`: the row and column scans the joins and creases read;
 //! - `contours`: the outlines and holes of the regions that become polygons.
 
@@ -41,8 +43,9 @@ use runs::{par_label_runs, write_runs};
 pub type Segmented = (Segmentation, Vec<Outline>, Vec<Option<PlaneFit>>, Creases);
 
 /// The regions' planes (`fit` is the batched RANSAC + refit of the twin), leaks split
-/// and fitted again, coplanar pieces joined, regions grown back to their true borders,
-/// outlines traced, creases found. Times the RANSAC calls as `ransac`, the rest as `contours`.
+/// and fitted again, coplanar pieces joined, regions grown back to their true borders
+/// (joined and grown once more where growth brought pieces within reach), outlines
+/// traced, creases found. Times the RANSAC calls as `ransac`, the rest as `contours`.
 pub fn segment_and_fit(
     mut seg: Segmentation,
     cloud: &Cloud,
