@@ -330,9 +330,12 @@ impl<S: RosService> Client<S> {
         let asked = std::time::Instant::now();
         let replies = get.await.map_err(|e| fail(e.to_string()))?;
         // The replies end at once when no server is known, else at the timeout.
-        let reply = replies.recv_async().await.map_err(|_| match asked.elapsed() < timeout {
-            true => fail("no server of it is reachable".into()),
-            false => fail(format!("no reply within {timeout:?}")),
+        let reply = replies.recv_async().await.map_err(|_| {
+            if asked.elapsed() < timeout {
+                fail("no server of it is reachable".into())
+            } else {
+                fail(format!("no reply within {timeout:?}"))
+            }
         })?;
         match reply.result() {
             Ok(sample) => Ok(cdr::from_slice(&sample.payload().to_bytes())?),

@@ -246,10 +246,9 @@ impl NearbyRegions {
         // (cell, label) for every cell within `reach` cells of a cell holding a pixel of an
         // accepted region; each pair once (`seen` holds the last label that marked a cell).
         let (mut held, mut seen) = (vec![0u32; cells_w * cells_h], vec![0u32; cells_w * cells_h]);
-        let mut pairs: Vec<(u32, u32)> = Vec::new();
+        let (mut pairs, mut own): (Vec<(u32, u32)>, Vec<usize>) = (Vec::new(), Vec::new());
         for (r, pixels) in seg.pixels.iter().enumerate().filter(|&(r, p)| accepted[r] && !p.is_empty()) {
             let label = r as u32 + 1;
-            let mut own = Vec::new();
             // The pixels ascend: row by row, and along a row a cell at a time where the
             // region runs unbroken to the cell's end (most of it), a pixel at a time where not.
             let (mut v, mut k) = (pixels[0] as usize / w, 0);
@@ -268,7 +267,7 @@ impl NearbyRegions {
                 let unbroken = pixels.get(k + to_cell_end - 1).is_some_and(|&j| j as usize == i + to_cell_end - 1);
                 k += if unbroken { to_cell_end } else { 1 };
             }
-            for c in own {
+            for c in own.drain(..) {
                 let (cu, cv) = (c % cells_w, c / cells_w);
                 for nv in cv.saturating_sub(reach)..=(cv + reach).min(cells_h - 1) {
                     for nu in cu.saturating_sub(reach)..=(cu + reach).min(cells_w - 1) {
