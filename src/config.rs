@@ -364,6 +364,10 @@ pub struct PipelineConfig {
     pub ransac_min_inlier_ratio: f64,
     /// After the fits, regions take back border pixels on their plane up to this deep, pixels.
     pub region_grow_px: u32,
+    /// A polygon whose two halves' planes bend by more than this (or their noise's 3 sigma
+    /// if that is more) is two surfaces, held back; under it, published, the bend counted
+    /// in its covariance. Degrees.
+    pub max_halves_bend_deg: f64,
 }
 
 impl Default for PipelineConfig {
@@ -384,6 +388,7 @@ impl Default for PipelineConfig {
             ransac_inlier_distance_m: 0.01,
             ransac_min_inlier_ratio: 0.9,
             region_grow_px: 4,
+            max_halves_bend_deg: 8.0,
         }
     }
 }
@@ -747,6 +752,7 @@ impl Config {
         check_range("pipeline.ransac_inlier_distance_m", p.ransac_inlier_distance_m, 1e-5, 1.0)?;
         check_range("pipeline.ransac_min_inlier_ratio", p.ransac_min_inlier_ratio, 0.0, 1.0)?;
         check_range("pipeline.region_grow_px", p.region_grow_px as f64, 0.0, 32.0)?;
+        check_range("pipeline.max_halves_bend_deg", p.max_halves_bend_deg, 0.0, 45.0)?;
 
         let m = &self.map;
         check_range("map.merge_height_tolerance_m", m.merge_height_tolerance_m, 1e-4, 1.0)?;

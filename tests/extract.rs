@@ -337,7 +337,9 @@ fn a_tread_running_off_the_top_of_the_image_ends_near_its_back_edge() {
     // Frame 45 of the 180-frame walk: tread 2 (x 0.28..0.56, z 0.30) runs off the top of
     // the image, where the next riser begins; its outline's pixels there can be the riser's
     // first, within the inlier distance of the tread's plane, which ray-cast onto it at
-    // this grazing angle land 4-6 cm past the back edge.
+    // this grazing angle land 4-6 cm past the back edge. Kept to the tread's plane, they
+    // end within 3 cm of it (the crease's pixels go to whichever plane their noise puts
+    // them nearer, a few millimetres up the riser at most).
     let scene = Scene::build(SceneKind::Straight);
     let i = intr(320, 240);
     let pose = trajectory(&scene, 180)[45];
@@ -354,7 +356,7 @@ fn a_tread_running_off_the_top_of_the_image_ends_near_its_back_edge() {
     far.sort_by(f64::total_cmp);
     assert!(far.len() >= 2, "the outline reaches the back edge: {:?}", tread.boundary);
     let median = far[far.len() / 2];
-    assert!((0.55..0.58).contains(&median), "the far edge's vertices end near x = 0.56: {far:?}");
+    assert!((0.55..0.59).contains(&median), "the far edge's vertices end near x = 0.56: {far:?}");
 }
 
 #[test]
@@ -966,7 +968,7 @@ fn a_sample_of_every_k_th_point_stands_for_all_of_them() {
 
 #[test]
 fn a_strip_that_took_in_two_rows_of_the_riser_is_two_surfaces_and_a_clean_one_is_one() {
-    use polymap::extract::polygon::MAX_HALVES_BEND_DEG;
+    let max_bend = PipelineConfig::default().max_halves_bend_deg.to_radians();
     use polymap::extract::uncertainty::{halves_agreement, plane_uncertainty};
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
@@ -995,10 +997,10 @@ fn a_strip_that_took_in_two_rows_of_the_riser_is_two_surfaces_and_a_clean_one_is
         (fit, halves_agreement(pts, 1, &fit, 0.01, &cut).expect("both halves fix a plane"))
     };
     let (fit, clean) = bend_of(&strip(0));
-    assert!(clean.one_surface(MAX_HALVES_BEND_DEG.to_radians()), "{clean:?}");
+    assert!(clean.one_surface(max_bend), "{clean:?}");
     assert!(fit.normal.y < -0.9999, "the clean strip's plane is level: {:?}", fit.normal);
     let (fit, mixed) = bend_of(&strip(2));
-    assert!(!mixed.one_surface(MAX_HALVES_BEND_DEG.to_radians()), "{mixed:?}");
+    assert!(!mixed.one_surface(max_bend), "{mixed:?}");
     assert!(mixed.angle_rad > 10.0 * mixed.sigma_rad, "far beyond the noise: {mixed:?}");
     assert!(fit.normal.y > -0.9998, "and its fit is tilted by over a degree: {:?}", fit.normal);
 }
@@ -1006,15 +1008,16 @@ fn a_strip_that_took_in_two_rows_of_the_riser_is_two_surfaces_and_a_clean_one_is
 #[test]
 fn what_is_held_back_is_recorded_with_its_reason_and_what_is_doubtful_is_marked() {
     use polymap::extract::{Footing, HoldBack};
-    // Two frames of the straight walk with a region whose halves bend: in frame 20 beyond
-    // the bar (held back, not published, and said why), in frame 28 under it (published,
-    // its bend counted in its covariance: not steppable).
+    // Frame 28 of the straight walk has a region whose halves bend: under the default bar
+    // it is published, its bend counted in its covariance (not steppable); with the bar
+    // lowered under its bend it is held back, not published, and said why.
     let seq = polymap::sequence::Sequence::open("mock_frames/straight_320").unwrap();
-    let cfg = PipelineConfig::default();
+    let default = PipelineConfig::default();
+    let strict = PipelineConfig { max_halves_bend_deg: 2.0, ..default.clone() };
     let mut not_one_plane = [0; 2];
     let mut marked = [0; 2];
-    for (i, k) in [20, 28].into_iter().enumerate() {
-        let e = extract_cpu(&seq.depth(k).unwrap(), &seq.intrinsics, &cfg).unwrap();
+    for (i, cfg) in [&default, &strict].into_iter().enumerate() {
+        let e = extract_cpu(&seq.depth(28).unwrap(), &seq.intrinsics, cfg).unwrap();
         for h in &e.stages.held_back {
             match h.why {
                 HoldBack::TooSmall => assert!(h.area < cfg.min_polygon_area_m2, "{h:?}"),
@@ -1026,6 +1029,7 @@ fn what_is_held_back_is_recorded_with_its_reason_and_what_is_doubtful_is_marked(
         marked[i] =
             (e.polygons.polygons.iter()).filter(|p| p.footing == Footing::TiltUnknown && p.pixel_count > 500).count();
     }
-    assert_eq!(not_one_plane, [1, 0], "the region bent beyond the bar");
-    assert!(marked[1] >= 1, "the region bent under it is published, not steppable");
+    assert!(marked[0] >= 1 && not_one_plane[0] == 0, "the bent region is published, not steppable: {marked:?}");
+    assert!(not_one_plane[1] >= 1, "and held back under a lower bar: {not_one_plane:?}");
+    assert!(marked[1] < marked[0], "which it no longer passes: {marked:?}");
 }

@@ -117,7 +117,7 @@ pub enum HoldBack {
     TooSmall,
     /// Its inliers do not fix a plane (too few, or on a line).
     NoPlane,
-    /// Its two halves bend by more than `MAX_HALVES_BEND_DEG` (and their noise).
+    /// Its two halves bend by more than `max_halves_bend_deg` (and their noise).
     NotOnePlane,
 }
 
@@ -241,7 +241,7 @@ pub fn build_polygons(
                 return Err(HoldBack::NoPlane);
             };
             match halves_agreement(&sample.points, sample.stride, fit, dist, &cut) {
-                Some(h) if h.one_surface(MAX_HALVES_BEND_DEG.to_radians()) => {
+                Some(h) if h.one_surface(cfg.max_halves_bend_deg.to_radians()) => {
                     // Two leans its noise does not show: the rays' along a narrow support,
                     // and a share of a bend beyond noise, towards the cut's normal.
                     let bend = BEND_LEAN_SHARE * h.bend_beyond_noise_rad();
@@ -287,20 +287,13 @@ pub fn build_polygons(
     (out, held_back)
 }
 
-/// Two halves of a polygon's inliers may bend by this much, or by their noise's three
-/// sigma if that is more, and still count as one plane. A region that took in a few rows
-/// of its neighbour tilts by a fifth to a quarter of its halves' bend (on the mock stairs'
-/// partial views: bends of 2.5, 3.2, 7.4, 9.4, 13 and 21 deg tilted the whole fit by 0.5,
-/// 0.7, 1.8, 2.3, 2.7 and 4.4 deg). Under this bar the region is published and the
-/// footing rule counts a quarter of the bend in its covariance (`BEND_LEAN_SHARE`), so one
-/// that would tilt past the steppable bar is marked; over it, more of the region is the
-/// other surface than a foot would find (the real ABW faces that bend 4-8 deg are whole).
-pub const MAX_HALVES_BEND_DEG: f64 = 8.0;
-
 /// A region whose halves bend by more than their noise (3 sigma) leans its whole fit by up
-/// to this share of the excess (the measurements above: a fifth to a quarter); the
-/// polygon's covariance counts that lean, so a bend under `MAX_HALVES_BEND_DEG` that would
-/// still tilt it past the steppable bar marks it not steppable.
+/// to this share of the excess (a region that took in a few rows of its neighbour tilts
+/// by a fifth to a quarter of its halves' bend: bends of 2.5, 3.2, 7.4, 9.4, 13 and 21 deg
+/// on the mock stairs' partial views tilted the whole fit by 0.5, 0.7, 1.8, 2.3, 2.7 and
+/// 4.4 deg); the polygon's covariance counts that lean, so a bend under
+/// `max_halves_bend_deg` that would still tilt it past the steppable bar marks it not
+/// steppable.
 pub const BEND_LEAN_SHARE: f64 = 0.25;
 
 /// Outline vertices within this many pixels of the image's edge are on its border.

@@ -56,7 +56,15 @@ pub fn trace(seg: &Segmentation, simplify_px: f64, wanted: &[bool]) -> Vec<Outli
                 marks.cover(w * h);
                 points.clear();
                 let borders = follow_borders(&shape, pixels, marks, points);
-                let Some(oi) = borders.iter().position(|b| b.kind == BorderKind::Outer) else { return };
+                // A region in pieces (joined across a stripe, or cut by its neighbours) is
+                // outlined by its largest.
+                let area = |b: &Border| {
+                    let ring = &points[b.points.clone()];
+                    let pairs = ring.iter().zip(ring.iter().cycle().skip(1));
+                    pairs.map(|(p, q)| p.x as i64 * q.y as i64 - q.x as i64 * p.y as i64).sum::<i64>().abs()
+                };
+                let outers = borders.iter().enumerate().filter(|(_, b)| b.kind == BorderKind::Outer);
+                let Some((oi, _)) = outers.max_by_key(|(_, b)| area(b)) else { return };
                 region.outer = offset_ring(&simplify(&points[borders[oi].points.clone()], simplify_px, simple), 0.5);
                 for b in &borders {
                     if b.kind == BorderKind::Hole && b.parent == Some(oi) {
@@ -549,5 +557,23 @@ mod tests {
             compared > 2000 && fewer > 500,
             "{compared} borders compared, {fewer} with under half the points as corners"
         );
+    }
+
+    /// A region in two pieces (a speck cut off it first in scan order, a large part
+    /// below) is outlined by the large part.
+    #[test]
+    fn a_region_in_pieces_is_outlined_by_its_largest() {
+        let (w, h) = (30usize, 30usize);
+        let inside = |u: usize, v: usize| {
+            (2..4).contains(&u) && (1..3).contains(&v) || (5..25).contains(&u) && (8..28).contains(&v)
+        };
+        let labels: Vec<u32> = (0..w * h).map(|i| u32::from(inside(i % w, i / w))).collect();
+        let pixels = vec![(0..w * h).filter(|&i| labels[i] == 1).map(|i| i as u32).collect()];
+        let seg = Segmentation { labels: crate::extract::Grid { width: w, height: h, data: labels }, pixels };
+        let outline = trace(&seg, 0.5, &[true]).remove(0);
+        let (us, vs): (Vec<f32>, Vec<f32>) = outline.outer.iter().map(|&[u, v]| (u, v)).unzip();
+        let extent =
+            |c: &[f32]| (c.iter().copied().fold(f32::MAX, f32::min), c.iter().copied().fold(f32::MIN, f32::max));
+        assert_eq!((extent(&us), extent(&vs)), ((4.5, 24.5), (7.5, 27.5)), "{:?}", outline.outer);
     }
 }

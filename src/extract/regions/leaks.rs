@@ -1,6 +1,10 @@
 //! Leak splits: a region whose plane fits too few of its points (a Canny line broken by a
 //! dropout let two surfaces leak into one) keeps the largest connected patch of that
-//! plane's inliers; the rest becomes new regions, fitted again.
+//! plane's inliers; the rest becomes new regions, fitted again. A region whose plane fits
+//! enough of its points still gives up each large connected piece of its outliers: a
+//! second face it took in across a crease whose edge broke, too small a share of it to
+//! fail the ratio (a 35 deg side face, half of it within the inlier distance of the top's
+//! plane).
 
 use super::Segmentation;
 use crate::extract::cloud::Cloud;
@@ -10,9 +14,8 @@ use crate::grid::flood;
 /// The label of a leaking region's pixels between its split and their regrouping.
 pub(super) const RELEASED: u32 = u32::MAX;
 
-/// What `split_leaks` did: the regions it cut back to their plane's largest patch (their
-/// labels changed), and the new regions made of the pieces of the rest that are large
-/// enough (ascending).
+/// What `split_leaks` did: the regions it cut (their labels changed), and the new regions
+/// made of what it cut off that is large enough (ascending).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Leaks {
     pub split: Vec<usize>,
@@ -22,7 +25,9 @@ pub struct Leaks {
 impl Segmentation {
     /// Splits every region whose fit has an inlier ratio under `min_ratio`: it keeps the
     /// largest 8-connected patch of its plane's inliers, refitted; the other connected
-    /// pieces of at least `min_pixels` become new regions (their fits None).
+    /// pieces of at least `min_pixels` become new regions (their fits None). Every other
+    /// region with a fit gives up the 8-connected pieces of its outliers of at least
+    /// `min_pixels` as new regions (`cut_outliers`).
     pub fn split_leaks(
         &mut self,
         fits: &mut Vec<Option<PlaneFit>>,
@@ -39,6 +44,12 @@ impl Segmentation {
         for r in 0..self.pixels.len() {
             let Some(fit) = fits[r] else { continue };
             if fit.inlier_ratio() >= min_ratio {
+                let cut = self.cut_outliers(r, &fit, cloud, dist, min_pixels, &mut seen);
+                if !cut.is_empty() {
+                    leaks.split.push(r);
+                    leaks.pieces.extend(cut);
+                    fits.resize(self.pixels.len(), None);
+                }
                 continue;
             }
             leaks.split.push(r);
@@ -87,4 +98,52 @@ impl Segmentation {
         }
         leaks
     }
+
+    /// Region r's outliers of `fit` (pixels with a point beyond `dist` of its plane) in
+    /// 8-connected pieces of at least `min_pixels` that leave the plane
+    /// (`leaves_the_plane`), each made a new region; r keeps the
+    /// rest, smaller pieces included (a plane's noise, filled in its polygon). Returns the
+    /// new regions. `seen` is all false on entry and exit.
+    fn cut_outliers(
+        &mut self,
+        r: usize,
+        fit: &PlaneFit,
+        cloud: &Cloud,
+        dist: f32,
+        min_pixels: usize,
+        seen: &mut [bool],
+    ) -> Vec<usize> {
+        let (w, h, label) = (self.labels.width, self.labels.height, r as u32 + 1);
+        let outlier =
+            |i: usize| self.labels.data[i] == label && cloud.point(i).is_some_and(|p| fit.distance(&p) >= dist as f64);
+        let mut cut = Vec::new();
+        for &i in &self.pixels[r] {
+            if !seen[i as usize] && outlier(i as usize) {
+                let piece = flood(i as usize, w, h, seen, outlier);
+                if piece.len() >= min_pixels && leaves_the_plane(&piece, fit, cloud, dist) {
+                    cut.push(piece);
+                }
+            }
+        }
+        self.pixels[r].iter().for_each(|&i| seen[i as usize] = false);
+        let pieces: Vec<usize> = cut.into_iter().map(|piece| self.push(piece)).collect();
+        if !pieces.is_empty() {
+            // In ascending order as they were: no sort.
+            self.pixels[r].retain(|&i| self.labels.data[i as usize] == label);
+        }
+        pieces
+    }
+}
+
+/// Half of a second face's points lie at least this many inlier distances off the plane:
+/// a face that turns away from it leaves it steadily, while the tail of a plane's noise
+/// beyond the band crowds the band's edge (a far patch of floor on a drift walk, 100
+/// pixels at 22 deg to the floor: a median of 1.4-1.6).
+const SECOND_FACE_MEDIAN_BANDS: f64 = 1.6;
+
+/// Whether a piece of a plane's outliers is a second face (`SECOND_FACE_MEDIAN_BANDS`).
+fn leaves_the_plane(piece: &[u32], fit: &PlaneFit, cloud: &Cloud, dist: f32) -> bool {
+    let mut off: Vec<f64> = piece.iter().filter_map(|&i| cloud.point(i as usize)).map(|p| fit.distance(&p)).collect();
+    let k = off.len() / 2;
+    !off.is_empty() && *off.select_nth_unstable_by(k, f64::total_cmp).1 >= SECOND_FACE_MEDIAN_BANDS * dist as f64
 }

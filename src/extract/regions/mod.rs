@@ -4,14 +4,17 @@
 //! - `runs`: regions numbered from the components (label runs to pixel lists);
 //! - `fits`: the points a region's plane is fitted on, and the sample the polygon checks read;
 //! - `leaks`: a region whose plane fits too few of its points is cut back to the plane's
-//!   largest patch, the rest fitted again as new regions;
+//!   largest patch, the rest fitted again as new regions; one that fits enough gives up
+//!   its large pieces of outliers (a second face) as new regions;
 //! - `joins`: pieces of one plane cut apart by dropouts or stripes joined; creases between
 //!   regions;
 //! - `growth`: regions take back the border band the edges ate, onto their planes (then
 //!   the joins once more, and growth again where they joined);
+//! - `borders`: where two regions meet, each pixel goes to the nearer of their planes;
 //! - `scan`: the row and column scans the joins and creases read;
 //! - `contours`: the outlines and holes of the regions that become polygons.
 
+mod borders;
 pub mod contours;
 mod fits;
 mod growth;
@@ -44,7 +47,8 @@ pub type Segmented = (Segmentation, Vec<Outline>, Vec<Option<PlaneFit>>, Creases
 
 /// The regions' planes (`fit` is the batched RANSAC + refit of the twin), leaks split
 /// and fitted again, coplanar pieces joined, regions grown back to their true borders
-/// (joined and grown once more where growth brought pieces within reach), outlines
+/// (joined and grown once more where growth brought pieces within reach), the pixels
+/// where two meet given to the nearer plane, outlines
 /// traced, creases found. Times the RANSAC calls as `ransac`, the rest as `contours`.
 pub fn segment_and_fit(
     mut seg: Segmentation,
@@ -58,8 +62,8 @@ pub fn segment_and_fit(
     let min_ratio = cfg.ransac_min_inlier_ratio;
     // The joins' scan reads the labels and the depth, and writes nothing the fits read: it
     // runs beside the fits' sample and the first fits (on another thread; one after the
-    // other on one), which are serial in part. It runs again only in a frame where a leak
-    // split has changed the labels (no mock frame has one).
+    // other on one), which are serial in part. It runs again only in a frame where a split
+    // (a leak, or a second face's outliers) has changed the labels.
     let (candidates, first_fits) = rayon::join(
         || seg.join_candidates(cloud, ratio),
         || {
@@ -96,6 +100,9 @@ pub fn segment_and_fit(
         accepted = accepted_of(&fits);
         seg.grow(&fits, &accepted, cloud, dist, cfg.region_grow_px);
     }
+    // Where a crease's edge broke, one region ran past it as far as the other face stays
+    // near its plane: the pixels go to the plane they lie nearer.
+    seg.settle_borders(&fits, &accepted, cloud, dist);
     // Three jobs that only read the grown regions, side by side: each is a few tenths of a
     // millisecond that its own parallel loop, held up by the largest region, barely splits.
     let ((mut points, creases), mut regions) = rayon::join(

@@ -564,3 +564,102 @@ fn strips_on_a_face_s_plane_join_it_whatever_their_own_fits_say() {
     assert!(seg.pixels[0].len() >= face_pixels, "{} of {face_pixels}", seg.pixels[0].len());
     assert!(fits[6].is_some() && seg.pixels[6].len() == 19 * h, "the riser stays its own region");
 }
+
+/// A 80 x 40 view of two faces meeting at a crease down column 40: the left face square
+/// to the camera at 1 m, the right one turned away by `turn_deg` about the crease. 1/depth
+/// is linear in the pixel on a plane, so each face is exact: the depth, the camera and
+/// the two planes.
+fn two_faces(turn_deg: f64) -> (Grid<f32>, crate::types::Intrinsics, [Option<PlaneFit>; 2]) {
+    let (w, h) = (80usize, 40usize);
+    let intr = centred_camera(w, h, 60.0);
+    // Along a row the right face's depth grows by tan(turn) of the width a pixel spans
+    // (near the crease, where the depth is 1 m).
+    let slope = (turn_deg.to_radians().tan() / 60.0) as f32;
+    let inverse_depth = |u: usize| if u <= 40 { 1.0 } else { 1.0 - slope * (u as f32 - 40.0) };
+    let depth = Grid { width: w, height: h, data: (0..w * h).map(|i| inverse_depth(i % w).recip()).collect() };
+    let cloud = Cloud::new(&depth, &intr);
+    let faces: Vec<u32> = (0..w * h).map(|i| if i % w <= 40 { 1 } else { 2 }).collect();
+    let pixels = (1..=2).map(|l| (0..w * h).filter(|&i| faces[i] == l).map(|i| i as u32).collect()).collect();
+    let truth = Segmentation { labels: Grid { width: w, height: h, data: faces }, pixels };
+    let fits = super::super::cpu::ransac::fit_planes(&truth.points(&[0, 1], &cloud), 32, 0.001);
+    (depth, intr, [fits[0], fits[1]])
+}
+
+/// Regions of an 80 x 40 image from a label per pixel.
+fn regions_of(labels: impl Fn(usize, usize) -> u32, count: u32) -> Segmentation {
+    let (w, h) = (80usize, 40usize);
+    let data: Vec<u32> = (0..w * h).map(|i| labels(i % w, i / w)).collect();
+    let pixels = (1..=count).map(|l| (0..w * h).filter(|&i| data[i] == l).map(|i| i as u32).collect()).collect();
+    Segmentation { labels: Grid { width: w, height: h, data }, pixels }
+}
+
+/// The left face's region ran ten columns past the crease (its edge line broke there):
+/// those pixels lie nearer the right face's plane, and go back to it; the left face's own
+/// pixels stay. Faces nearly one plane (5 deg) trade nothing: noise would choose there.
+#[test]
+fn a_region_that_ran_past_a_crease_gives_the_band_back_to_the_face_beyond() {
+    let (depth, intr, fits) = two_faces(35.0);
+    let cloud = Cloud::new(&depth, &intr);
+    let ran_past = |u: usize, _| if u < 50 { 1 } else { 2 };
+    let mut seg = regions_of(ran_past, 2);
+    let moved = seg.settle_borders(&fits, &[true, true], &cloud, 0.2);
+    assert_eq!(moved, 9 * 40, "columns 41..50, every row");
+    for (i, &l) in seg.labels.data.iter().enumerate() {
+        assert_eq!(l, if i % 80 <= 40 { 1 } else { 2 }, "pixel ({}, {})", i % 80, i / 80);
+    }
+    assert_eq!(seg.pixels[1].len(), 39 * 40, "the lists follow the labels");
+    // Not accepted: no plane to move to, or from.
+    let mut seg = regions_of(ran_past, 2);
+    assert_eq!(seg.settle_borders(&fits, &[true, false], &cloud, 0.2), 0);
+    let (depth, intr, fits) = two_faces(5.0);
+    let cloud = Cloud::new(&depth, &intr);
+    let mut seg = regions_of(ran_past, 2);
+    assert_eq!(seg.settle_borders(&fits, &[true, true], &cloud, 0.2), 0, "5 deg apart: one surface's pieces");
+}
+
+/// A region joined to its far part by a bridge one pixel wide across its neighbour's face
+/// keeps the bridge: every pixel of it lies on the neighbour's plane, but taking any would
+/// cut the region in two.
+#[test]
+fn settling_borders_never_cuts_a_region_in_two() {
+    let (depth, intr, fits) = two_faces(35.0);
+    let cloud = Cloud::new(&depth, &intr);
+    // The right face's region is columns 41..60 but for row 20, which the left face's
+    // region holds across to its far part, columns 60.. (on the right face's plane too).
+    let bridged = |u: usize, v: usize| if u <= 40 || v == 20 || u >= 60 { 1 } else { 2 };
+    let mut seg = regions_of(bridged, 2);
+    seg.settle_borders(&fits, &[true, true], &cloud, 0.2);
+    assert!((41..60).all(|u| seg.labels.data[20 * 80 + u] == 1), "the bridge stays");
+    let mut seen = vec![false; 80 * 40];
+    let first = seg.pixels[0][0] as usize;
+    let piece = crate::grid::flood(first, 80, 40, &mut seen, |j| seg.labels.data[j] == 1);
+    assert_eq!(piece.len(), seg.pixels[0].len(), "the left face's region is one piece");
+    // The far part's pixels beside the right face's region lie on its plane and go to it,
+    // but for those that hold the far part to the bridge.
+    assert!(seg.pixels[1].len() > 19 * 39, "{}", seg.pixels[1].len());
+}
+
+/// A region whose plane fits 41 of its 44 columns (over the inlier ratio) took in three
+/// columns of the face beyond the crease: they are cut out as a region of their own. A
+/// patch of its own face just beyond the inlier band (noise's tail, not a face turning
+/// away) stays in it.
+#[test]
+fn a_second_face_a_region_took_in_is_cut_out_though_its_plane_fits_enough() {
+    let (mut depth, intr, fits) = two_faces(35.0);
+    // A 6 x 6 patch of the left face 3.5 mm off its plane, the band being 3 mm.
+    for (u, v) in (10..16).flat_map(|u| (10..16).map(move |v| (u, v))) {
+        depth.data[v * 80 + u] += 0.0035;
+    }
+    let cloud = Cloud::new(&depth, &intr);
+    let mut seg = regions_of(|u, _| if u < 44 { 1 } else { 2 }, 2);
+    let mut got = super::super::cpu::ransac::fit_planes(&seg.points(&[0, 1], &cloud), 32, 0.003);
+    let left = got[0].expect("a plane");
+    assert!(left.inlier_ratio() >= 0.9 && left.normal.dot(&fits[0].unwrap().normal) > 0.9999, "{left:?}");
+    let leaks = seg.split_leaks(&mut got, &cloud, 0.003, 0.9, 30);
+    assert_eq!(leaks, Leaks { split: vec![0], pieces: vec![2] });
+    assert_eq!(got.len(), 3, "a fit, to come, for the new region");
+    let cut: Vec<u32> = (0..40).flat_map(|v| (41..44).map(move |u| (v * 80 + u) as u32)).collect();
+    assert_eq!(seg.pixels[2], cut);
+    assert_eq!(seg.pixels[0].len(), 41 * 40, "the patch stays: {}", seg.pixels[0].len());
+    assert!(seg.pixels[0].windows(2).all(|p| p[0] < p[1]));
+}
