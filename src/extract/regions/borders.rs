@@ -8,6 +8,7 @@ use super::Segmentation;
 use super::joins::JOIN_ANGLE_COS;
 use crate::extract::cloud::Cloud;
 use crate::extract::cpu::ransac::PlaneFit;
+use crate::grid::for_each_set;
 
 impl Segmentation {
     /// Moves pixels between touching accepted regions (`accepted[r]`) whose planes are
@@ -44,11 +45,8 @@ impl Segmentation {
             best.1.filter(|_| keeps_connected(labels, w, h, i))
         };
         let labels = &mut self.labels.data;
-        // Pixels of a region with a plane beside another's: the first wave's.
-        let mut wave: Vec<u32> = (0..w * h)
-            .filter(|&i| plane(labels[i]).is_some() && neighbours(i).any(|j| labels[j] != labels[i] && labels[j] != 0))
-            .map(|i| i as u32)
-            .collect();
+        let mut wave = border_pixels(labels, w);
+        wave.retain(|&i| plane(labels[i as usize]).is_some());
         let (mut queued, mut moved) = (vec![false; w * h], Vec::new());
         let mut total = 0;
         while !wave.is_empty() {
@@ -77,6 +75,30 @@ impl Segmentation {
         }
         total
     }
+}
+
+/// The pixels of a `w`-wide label image with a 4-neighbour in another region (0 is none),
+/// ascending: marked a whole row at a time with comparisons that vectorise, then visited
+/// by `for_each_set`.
+fn border_pixels(labels: &[u32], w: usize) -> Vec<u32> {
+    let mut beside = vec![0u8; labels.len()];
+    let differ = |a: &u32, b: &u32| u8::from((a != b) & (*a != 0) & (*b != 0));
+    for (row, marks) in labels.chunks_exact(w).zip(beside.chunks_exact_mut(w)) {
+        let pairs = || row.iter().zip(&row[1..]);
+        marks.iter_mut().zip(pairs()).for_each(|(m, (a, b))| *m |= differ(a, b));
+        marks[1..].iter_mut().zip(pairs()).for_each(|(m, (a, b))| *m |= differ(a, b));
+    }
+    let mut across = vec![0u8; w];
+    for v in 1..labels.len() / w {
+        let pairs = labels[(v - 1) * w..v * w].iter().zip(&labels[v * w..(v + 1) * w]);
+        across.iter_mut().zip(pairs).for_each(|(d, (a, b))| *d = differ(a, b));
+        for row in [v - 1, v] {
+            beside[row * w..(row + 1) * w].iter_mut().zip(&across).for_each(|(m, d)| *m |= d);
+        }
+    }
+    let mut out = Vec::new();
+    for_each_set(&beside, |i| out.push(i as u32));
+    out
 }
 
 /// Whether pixel i's region stays in one piece around it without it: the pixels of its

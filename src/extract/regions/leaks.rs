@@ -44,6 +44,10 @@ impl Segmentation {
         for r in 0..self.pixels.len() {
             let Some(fit) = fits[r] else { continue };
             if fit.inlier_ratio() >= min_ratio {
+                // Too few outliers, by the fit's count, to make a piece worth a region.
+                if (1.0 - fit.inlier_ratio()) * (self.pixels[r].len() as f64) < min_pixels as f64 {
+                    continue;
+                }
                 let cut = self.cut_outliers(r, &fit, cloud, dist, min_pixels, &mut seen);
                 if !cut.is_empty() {
                     leaks.split.push(r);
