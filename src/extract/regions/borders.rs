@@ -31,14 +31,13 @@ impl Segmentation {
         let nearer = |labels: &[u32], i: usize| -> Option<u32> {
             let own = plane(labels[i])?;
             let p = cloud.point(i)?;
-            let resid = |f: &PlaneFit| f.distance(&p);
-            let mut best = (resid(&own), None);
+            let mut best = (own.distance(&p), None);
             for l in neighbours(i).map(|j| labels[j]).filter(|&l| l != labels[i]) {
                 let Some(other) = plane(l).filter(|o| o.normal.dot(&own.normal).abs() < JOIN_ANGLE_COS) else {
                     continue;
                 };
-                let d = resid(&other);
-                if other.distance(&p) < dist as f64 && d < best.0 {
+                let d = other.distance(&p);
+                if d < dist as f64 && d < best.0 {
                     best = (d, Some(l));
                 }
             }
