@@ -463,8 +463,7 @@ fn the_regions_around_a_pixel_are_those_with_a_pixel_a_cell_or_so_away() {
         }
     };
     let data: Vec<u32> = (0..w * h).map(label).collect();
-    let pixels = (1..=5).map(|l| (0..w * h).filter(|&i| data[i] == l).map(|i| i as u32).collect()).collect();
-    let seg = Segmentation { labels: Grid { width: w, height: h, data }, pixels };
+    let seg = Segmentation::from_labels(Grid { width: w, height: h, data }, 5, 0);
     let accepted = [true, true, true, true, false];
     for margin in [1, 16, 17, 40] {
         let nearby = NearbyRegions::new(&seg, &accepted, margin);
@@ -505,8 +504,7 @@ fn a_far_region_s_plane_does_not_stop_a_region_growing_where_it_cannot_reach() {
             _ => 0,
         })
         .collect();
-    let pixels = (1..=2).map(|l| (0..w * h).filter(|&i| data[i] == l).map(|i| i as u32).collect()).collect();
-    let mut seg = Segmentation { labels: Grid { width: w, height: h, data }, pixels };
+    let mut seg = Segmentation::from_labels(Grid { width: w, height: h, data }, 2, 0);
     let plane =
         |normal: Vector3<f64>| PlaneFit { normal: normal.normalize(), offset: -1.0, inliers: 1, points: 1, rms: 0.0 };
     let fits = [Some(plane(Vector3::z())), Some(plane(Vector3::new(0.001, 0.0, 1.0)))];
@@ -543,8 +541,7 @@ fn strips_on_a_face_s_plane_join_it_whatever_their_own_fits_say() {
         _ => 0,
     };
     let data: Vec<u32> = (0..w * h).map(|i| region(i % w)).collect();
-    let pixels = (1..=7).map(|l| (0..w * h).filter(|&i| data[i] == l).map(|i| i as u32).collect()).collect();
-    let mut seg = Segmentation { labels: Grid { width: w, height: h, data }, pixels };
+    let mut seg = Segmentation::from_labels(Grid { width: w, height: h, data }, 7, 0);
     let all: Vec<usize> = (0..7).collect();
     let mut fits = super::super::cpu::ransac::fit_planes(&seg.points(&all, &cloud), 32, 0.003);
     // The strips' own planes, as narrow fits on noisy depth come out: 30 deg off the face's.
@@ -578,19 +575,16 @@ fn two_faces(turn_deg: f64) -> (Grid<f32>, crate::types::Intrinsics, [Option<Pla
     let inverse_depth = |u: usize| if u <= 40 { 1.0 } else { 1.0 - slope * (u as f32 - 40.0) };
     let depth = Grid { width: w, height: h, data: (0..w * h).map(|i| inverse_depth(i % w).recip()).collect() };
     let cloud = Cloud::new(&depth, &intr);
-    let faces: Vec<u32> = (0..w * h).map(|i| if i % w <= 40 { 1 } else { 2 }).collect();
-    let pixels = (1..=2).map(|l| (0..w * h).filter(|&i| faces[i] == l).map(|i| i as u32).collect()).collect();
-    let truth = Segmentation { labels: Grid { width: w, height: h, data: faces }, pixels };
+    let truth = regions_of(|u, _| if u <= 40 { 1 } else { 2 }, 2);
     let fits = super::super::cpu::ransac::fit_planes(&truth.points(&[0, 1], &cloud), 32, 0.001);
     (depth, intr, [fits[0], fits[1]])
 }
 
 /// Regions of an 80 x 40 image from a label per pixel.
-fn regions_of(labels: impl Fn(usize, usize) -> u32, count: u32) -> Segmentation {
+fn regions_of(labels: impl Fn(usize, usize) -> u32, count: usize) -> Segmentation {
     let (w, h) = (80usize, 40usize);
     let data: Vec<u32> = (0..w * h).map(|i| labels(i % w, i / w)).collect();
-    let pixels = (1..=count).map(|l| (0..w * h).filter(|&i| data[i] == l).map(|i| i as u32).collect()).collect();
-    Segmentation { labels: Grid { width: w, height: h, data }, pixels }
+    Segmentation::from_labels(Grid { width: w, height: h, data }, count, 0)
 }
 
 /// The left face's region ran ten columns past the crease (its edge line broke there):
