@@ -635,8 +635,9 @@ fn a_polygon_is_cut_at_a_neighbour_plane_that_meets_it_and_bounds_its_points_and
 fn regions_meet_along_a_crease_not_across_a_wide_gap_a_depth_step_or_a_corner() {
     use polymap::extract::regions::Segmentation;
     // Region A: columns 0..15, region B: from column 15 + gap on, both 20 rows; `far` puts
-    // B that much further from the camera than A's 1 m.
-    let meet = |gap: usize, far: f32| {
+    // B that much further from the camera than A's 1 m; the gap's pixels have the depth
+    // `between` gives the k-th of them.
+    let meet_with = |gap: usize, far: f32, between: &dyn Fn(usize) -> f32| {
         let (w, h) = (40, 20);
         let boundary = Grid {
             width: w,
@@ -645,15 +646,26 @@ fn regions_meet_along_a_crease_not_across_a_wide_gap_a_depth_step_or_a_corner() 
         };
         let seg = Segmentation::components(&boundary, 10);
         assert_eq!(seg.pixels.len(), if gap == 0 { 1 } else { 2 });
-        let depth =
-            Grid { width: w, height: h, data: (0..w * h).map(|i| if i % w < 15 { 1.0 } else { 1.0 + far }).collect() };
+        let depth = |u: usize| match u {
+            ..15 => 1.0,
+            u if u < 15 + gap => between(u - 15),
+            _ => 1.0 + far,
+        };
+        let depth = Grid { width: w, height: h, data: (0..w * h).map(|i| depth(i % w)).collect() };
         seg.creases(&Cloud::new(&depth, &intr(w as u32, h as u32)), 0.03).meet(1, 2)
     };
+    // The gap ramps evenly from one face's depth to the other's, as across a crease.
+    let meet = |gap: usize, far: f32| meet_with(gap, far, &|k| 1.0 + far * (k + 1) as f32 / (gap + 1) as f32);
     assert!(meet(1, 0.0), "a one-pixel edge line between two faces");
     assert!(meet(4, 0.0), "the widest band growth may leave");
     assert!(!meet(6, 0.0), "too far apart in the image");
     assert!(meet(3, 0.05), "a crease seen at an angle: 5 cm over 4 pixels is no depth step");
     assert!(!meet(3, 0.5), "an occluding edge: half a metre further is a depth step");
+    // An occluding edge 4 cm in front of the face behind, the gap the occluder's last pixel then that
+    // face: within 4 pixels' allowance end to end, but a step between two neighbours.
+    assert!(!meet_with(3, 0.04, &|k| [1.0, 1.04, 1.04][k]), "a step inside the gap is a depth step");
+    // The same ends across dropouts: nothing to say where the depth stepped.
+    assert!(meet_with(3, 0.04, &|_| 0.0), "dropouts between the faces");
     // Two blocks touching at a corner only.
     let (w, h) = (20, 20);
     let block = |i: usize| {

@@ -27,7 +27,7 @@ pub struct JoinCandidates {
 
 /// Which regions meet along a crease of the surface: where a row or a column steps from
 /// one region to the other (across at most `MAX_CREASE_GAP_PX` unlabelled pixels) with no
-/// depth step between the two pixels. Regions side by side across a depth step (a box's
+/// depth step on the way between the two pixels. Regions side by side across a depth step (a box's
 /// top before the floor behind it) or apart in the image do not meet.
 pub struct Creases {
     /// (a, b) with a < b (labels), and the number of steps between them; sorted.

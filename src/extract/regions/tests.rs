@@ -305,7 +305,7 @@ fn steps_between_regions_are_the_walks_back_along_rows_and_up_columns() {
     let (ratio, max_gap) = (0.03f32, 4usize);
     // The oracle: from every labelled pixel, back along its row and up its column to the
     // nearest labelled pixel at most max_gap + 1 away; a pair where the two differ in
-    // label and not by a depth step.
+    // label and no depth step lies between them.
     let l = &seg.labels.data;
     let mut want = std::collections::BTreeMap::<(u32, u32), u32>::new();
     for j in (0..w * h).filter(|&j| l[j] != 0) {
@@ -315,8 +315,15 @@ fn steps_between_regions_are_the_walks_back_along_rows_and_up_columns() {
             else {
                 continue;
             };
-            let (zi, zj) = (depth.data[i], depth.data[j]);
-            if l[i] != l[j] && zi > 0.0 && zj > 0.0 && (zi - zj).abs() <= ratio * px as f32 * zi.min(zj) {
+            // No depth step: every pixel with a depth on the way within `ratio` per pixel of
+            // the last one with a depth, both ends with one.
+            let on_line: Vec<(usize, f32)> =
+                (0..=px).map(|k| (k, depth.data[i + k * stride])).filter(|&(_, z)| z > 0.0).collect();
+            let smooth = on_line
+                .windows(2)
+                .all(|p| (p[1].1 - p[0].1).abs() <= ratio * (p[1].0 - p[0].0) as f32 * p[1].1.min(p[0].1));
+            let ends = on_line.first().is_some_and(|p| p.0 == 0) && on_line.last().is_some_and(|p| p.0 == px);
+            if l[i] != l[j] && ends && smooth {
                 *want.entry((l[i].min(l[j]), l[i].max(l[j]))).or_default() += 1;
             }
         }
