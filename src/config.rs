@@ -368,6 +368,10 @@ pub struct PipelineConfig {
     /// if that is more) is two surfaces, held back; under it, published, the bend counted
     /// in its covariance. Degrees.
     pub max_halves_bend_deg: f64,
+    /// After growth, each blob of pixels no region took (opened by a pixel, 2 px wide and
+    /// more across, 30 pixels and more) becomes a region of its own: small faces the edges
+    /// took whole. Off for stairs: it adds far floor patches of a few hundred pixels.
+    pub seed_leftover_blobs: bool,
 }
 
 impl Default for PipelineConfig {
@@ -389,6 +393,7 @@ impl Default for PipelineConfig {
             ransac_min_inlier_ratio: 0.9,
             region_grow_px: 4,
             max_halves_bend_deg: 8.0,
+            seed_leftover_blobs: false,
         }
     }
 }

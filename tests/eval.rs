@@ -106,11 +106,11 @@ fn the_small_objects_config_segments_the_real_abw_blocks_into_their_faces() {
     }
     let small = summarise(&with_small, 0.8);
     let stairs = summarise(&with_stairs, 0.8);
-    // 17.8 faces per image; measured 15.5 correct and 0.7 noise regions with the
+    // 17.8 faces per image; measured 15.67 correct (88 %) and 0.8 noise regions with the
     // small-objects config (the 1996 paper's four segmenters: 9.7-13.4 of 15.2 over all 30),
     // 1.9 with the stairs defaults (only the table and the back board are big enough).
     assert!((small.truth_faces - 17.8).abs() < 0.05, "{small:?}");
-    assert!(small.correct >= 15.2 && small.correct_min >= 8 && small.noise <= 1.2, "{small:?}");
+    assert!(small.correct >= 15.6 && small.correct_min >= 8 && small.noise <= 1.2, "{small:?}");
     assert!(stairs.correct <= 3.0, "{stairs:?}");
     // Touching faces found correctly meet at the truth's angle: the median error is well
     // under a degree (the mean carries image 0's face 18, whose truth points fit no plane).

@@ -10,6 +10,8 @@
 //!   regions;
 //! - `growth`: regions take back the border band the edges ate, onto their planes (then
 //!   the joins once more, and growth again where they joined);
+//! - `seeds`: the blobs of pixels no region took (a face the edges took whole) become
+//!   regions, fitted, joined and grown like the rest;
 //! - `borders`: where two regions meet, each pixel goes to the nearer of their planes;
 //! - `scan`: the row and column scans the joins and creases read;
 //! - `contours`: the outlines and holes of the regions that become polygons.
@@ -22,6 +24,7 @@ mod joins;
 mod leaks;
 mod runs;
 mod scan;
+mod seeds;
 #[cfg(test)]
 mod tests;
 
@@ -99,6 +102,24 @@ pub fn segment_and_fit(
     if seg.join_coplanar(candidates, &mut fits, cloud, dist, min_ratio) > 0 {
         accepted = accepted_of(&fits);
         seg.grow(&fits, &accepted, cloud, dist, cfg.region_grow_px);
+    }
+    // Faces the edges took whole lie in the blobs no region took: each blob a region,
+    // fitted, joined to a neighbour whose plane it lies on, grown back to its border.
+    let seeds = if cfg.seed_leftover_blobs { seg.seed_leftovers(cloud, MIN_REGION_PIXELS) } else { Vec::new() };
+    if !seeds.is_empty() {
+        let batch = seg.sampled_points(&seeds, cloud, MAX_FIT_POINTS);
+        times.contours += lap();
+        fits.resize(seg.pixels.len(), None);
+        for (&r, f) in seeds.iter().zip(fit(&batch)?) {
+            fits[r] = f;
+        }
+        times.ransac += lap();
+        if seg.release_rejected(&seeds, &mut fits, min_ratio) > 0 {
+            let candidates = seg.join_candidates(cloud, ratio);
+            seg.join_coplanar(candidates, &mut fits, cloud, dist, min_ratio);
+            accepted = accepted_of(&fits);
+            seg.grow(&fits, &accepted, cloud, dist, cfg.region_grow_px);
+        }
     }
     // Where a crease's edge broke, one region ran past it as far as the other face stays
     // near its plane: the pixels go to the plane they lie nearer.

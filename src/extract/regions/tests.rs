@@ -664,3 +664,48 @@ fn a_second_face_a_region_took_in_is_cut_out_though_its_plane_fits_enough() {
     assert_eq!(seg.pixels[0].len(), 41 * 40, "the patch stays: {}", seg.pixels[0].len());
     assert!(seg.pixels[0].windows(2).all(|p| p[0] < p[1]));
 }
+
+/// What no region took: a 12 x 12 blob (a face the edges took whole) is seeded as a
+/// region of its core (the ring the opening took is growth's to give back); the 4-pixel
+/// band between two regions (what growth leaves along a crease) and a blob of dropouts
+/// are not. A seed whose fit is rejected gives its pixels back.
+#[test]
+fn the_blobs_no_region_took_are_seeded_and_the_bands_between_faces_are_not() {
+    let (w, h) = (80usize, 40usize);
+    let band = |u: usize| (30..34).contains(&u);
+    let blob = |u: usize, v: usize| (45..57).contains(&u) && (14..26).contains(&v);
+    let dropouts = |u: usize, v: usize| (64..76).contains(&u) && (14..26).contains(&v);
+    let mut seg = regions_of(
+        |u, v| {
+            if band(u) || blob(u, v) || dropouts(u, v) {
+                0
+            } else if u < 30 {
+                1
+            } else {
+                2
+            }
+        },
+        2,
+    );
+    let depth = Grid {
+        width: w,
+        height: h,
+        data: (0..w * h).map(|i| if dropouts(i % w, i / w) { 0.0 } else { 1.0 }).collect(),
+    };
+    let cloud = Cloud::new(&depth, &centred_camera(w, h, 60.0));
+    let seeds = seg.seed_leftovers(&cloud, 30);
+    assert_eq!(seeds, vec![2], "one seed, after the two regions");
+    let core: Vec<u32> = (0..(w * h) as u32)
+        .filter(|&i| (46..56).contains(&(i as usize % w)) && (15..25).contains(&(i as usize / w)))
+        .collect();
+    assert_eq!(seg.pixels[2], core, "the blob's 10 x 10 core");
+    for i in 0..w * h {
+        let (u, v) = (i % w, i / w);
+        if band(u) || dropouts(u, v) {
+            assert_eq!(seg.labels.data[i], 0, "({u}, {v}) stays unlabelled");
+        }
+    }
+    let mut fits = vec![None; 3];
+    assert_eq!(seg.release_rejected(&seeds, &mut fits, 0.9), 0, "no seed kept");
+    assert!(seg.pixels[2].is_empty() && seg.labels.data.iter().all(|&l| l <= 2), "a rejected seed is released");
+}
