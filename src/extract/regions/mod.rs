@@ -80,14 +80,7 @@ pub fn segment_and_fit(
     );
     let mut fits = first_fits?;
     let leaks = seg.split_leaks(&mut fits, cloud, dist, min_ratio, MIN_REGION_PIXELS);
-    let batch = seg.sampled_points(&leaks.pieces, cloud, MAX_FIT_POINTS);
-    times.contours += lap();
-    if !leaks.pieces.is_empty() {
-        for (r, f) in leaks.pieces.iter().zip(fit(&batch)?) {
-            fits[*r] = f;
-        }
-    }
-    times.ransac += lap();
+    fit_new(&seg, &leaks.pieces, cloud, &mut fits, &mut fit, times, lap)?;
     let candidates = if leaks.split.is_empty() { candidates } else { seg.join_candidates(cloud, ratio) };
     seg.join_coplanar(candidates, &mut fits, cloud, dist, min_ratio);
     let accepted_of = |fits: &[Option<PlaneFit>]| -> Vec<bool> {
@@ -107,13 +100,7 @@ pub fn segment_and_fit(
     // fitted, joined to a neighbour whose plane it lies on, grown back to its border.
     let seeds = if cfg.seed_leftover_blobs { seg.seed_leftovers(cloud, MIN_REGION_PIXELS) } else { Vec::new() };
     if !seeds.is_empty() {
-        let batch = seg.sampled_points(&seeds, cloud, MAX_FIT_POINTS);
-        times.contours += lap();
-        fits.resize(seg.pixels.len(), None);
-        for (&r, f) in seeds.iter().zip(fit(&batch)?) {
-            fits[r] = f;
-        }
-        times.ransac += lap();
+        fit_new(&seg, &seeds, cloud, &mut fits, &mut fit, times, lap)?;
         if seg.release_rejected(&seeds, &mut fits, min_ratio) > 0 {
             let candidates = seg.join_candidates(cloud, ratio);
             seg.join_coplanar(candidates, &mut fits, cloud, dist, min_ratio);
@@ -142,6 +129,29 @@ pub fn segment_and_fit(
     }
     times.contours += lap();
     Ok((seg, regions, fits, creases))
+}
+
+/// Fits the regions made since the first fits (a leak's pieces, the seeds), in one batch:
+/// the sample timed as `contours`, the fits as `ransac`.
+fn fit_new(
+    seg: &Segmentation,
+    regions: &[usize],
+    cloud: &Cloud,
+    fits: &mut Vec<Option<PlaneFit>>,
+    fit: &mut impl FnMut(&PointBatch) -> Result<Vec<Option<PlaneFit>>, ExtractError>,
+    times: &mut StageTimes,
+    lap: &mut impl FnMut() -> f64,
+) -> Result<(), ExtractError> {
+    let batch = seg.sampled_points(regions, cloud, MAX_FIT_POINTS);
+    times.contours += lap();
+    fits.resize(seg.pixels.len(), None);
+    if !regions.is_empty() {
+        for (&r, f) in regions.iter().zip(fit(&batch)?) {
+            fits[r] = f;
+        }
+    }
+    times.ransac += lap();
+    Ok(())
 }
 
 /// Pixel regions: region r is the pixels labelled r + 1 (0 = in no region).
