@@ -27,8 +27,8 @@ pub struct JoinCandidates {
 
 /// Which regions meet along a crease of the surface: where a row or a column steps from
 /// one region to the other (across at most `MAX_CREASE_GAP_PX` unlabelled pixels) with no
-/// depth step on the way between the two pixels. Regions side by side across a depth step (a box's
-/// top before the floor behind it) or apart in the image do not meet.
+/// depth step on the way between the two pixels. Regions side by side across a depth step
+/// (a box's top before the floor behind it) or apart in the image do not meet.
 pub struct Creases {
     /// (a, b) with a < b (labels), and the number of steps between them; sorted.
     steps: Vec<((u32, u32), u32)>,

@@ -101,7 +101,8 @@ pub fn segment_and_fit(
     let seeds = if cfg.seed_leftover_blobs { seg.seed_leftovers(cloud, MIN_REGION_PIXELS) } else { Vec::new() };
     if !seeds.is_empty() {
         fit_new(&seg, &seeds, cloud, &mut fits, &mut fit, times, lap)?;
-        if seg.release_rejected(&seeds, &mut fits, min_ratio) > 0 {
+        accepted = accepted_of(&fits);
+        if seg.release_rejected(&seeds, &accepted, &mut fits) > 0 {
             let candidates = seg.join_candidates(cloud, ratio);
             seg.join_coplanar(candidates, &mut fits, cloud, dist, min_ratio);
             accepted = accepted_of(&fits);

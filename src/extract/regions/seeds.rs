@@ -41,13 +41,17 @@ impl Segmentation {
             .collect()
     }
 
-    /// Gives the pixels of each seed whose fit has an inlier ratio under `min_ratio` back
-    /// to no region (its fit None): other regions may grow over them. Returns how many
-    /// seeds are kept.
-    pub(super) fn release_rejected(&mut self, seeds: &[usize], fits: &mut [Option<PlaneFit>], min_ratio: f64) -> usize {
+    /// Gives the pixels of each seed whose fit is not `accepted` back to no region (its fit
+    /// None): other regions may grow over them. Returns how many seeds are kept.
+    pub(super) fn release_rejected(
+        &mut self,
+        seeds: &[usize],
+        accepted: &[bool],
+        fits: &mut [Option<PlaneFit>],
+    ) -> usize {
         let mut kept = 0;
         for &r in seeds {
-            if fits[r].is_some_and(|f| f.inlier_ratio() >= min_ratio) {
+            if accepted[r] {
                 kept += 1;
             } else {
                 for &i in &std::mem::take(&mut self.pixels[r]) {

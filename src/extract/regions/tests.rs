@@ -706,6 +706,6 @@ fn the_blobs_no_region_took_are_seeded_and_the_bands_between_faces_are_not() {
         }
     }
     let mut fits = vec![None; 3];
-    assert_eq!(seg.release_rejected(&seeds, &mut fits, 0.9), 0, "no seed kept");
+    assert_eq!(seg.release_rejected(&seeds, &[true, true, false], &mut fits), 0, "no seed kept");
     assert!(seg.pixels[2].is_empty() && seg.labels.data.iter().all(|&l| l <= 2), "a rejected seed is released");
 }
