@@ -9,7 +9,6 @@ use crate::extract::Grid;
 use crate::extract::cloud::Cloud;
 use crate::extract::cpu::morphology::dilate;
 use crate::extract::cpu::ransac::PlaneFit;
-use crate::grid::component_runs;
 
 /// A seed's blob must be at least this wide (the spread of its pixels across its minor
 /// axis, one standard deviation, px): the bands growth leaves along a crease are thinner.
@@ -27,16 +26,10 @@ impl Segmentation {
             height: h,
             data: (0..w * h).map(|i| u8::from(self.labels.data[i] != 0 || cloud.depth(i) <= 0.0)).collect(),
         };
-        let free: Vec<bool> = dilate(&taken, 1, 1).data.iter().map(|&t| t == 0).collect();
-        let (runs, count) = component_runs(&free, w, h);
-        let mut blobs = vec![Vec::new(); count + 1];
-        for run in &runs {
-            blobs[run.label as usize].extend(run.start as u32..run.end as u32);
-        }
+        let blobs = Segmentation::components(&dilate(&taken, 1, 1), min_pixels).pixels;
         blobs
             .into_iter()
-            .skip(1)
-            .filter(|blob| blob.len() >= min_pixels && minor_spread(blob, w) >= MIN_SEED_SPREAD_PX)
+            .filter(|blob| minor_spread(blob, w) >= MIN_SEED_SPREAD_PX)
             .map(|blob| self.push(blob))
             .collect()
     }
