@@ -131,7 +131,7 @@ async fn run_with(
     let mut robot: Option<[f64; 3]> = None;
     let mut snapshot_tick = tokio::time::interval(Duration::from_secs_f64(config.map.snapshot_period_s));
     snapshot_tick.tick().await;
-    let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+    let mut signals = StopSignals::new()?;
     let deadline = async {
         match duration {
             Some(d) => tokio::time::sleep(d).await,
@@ -188,8 +188,7 @@ async fn run_with(
                 }
             }
             _ = &mut deadline => break false,
-            _ = tokio::signal::ctrl_c() => break false,
-            _ = sigterm.recv() => break false,
+            _ = signals.recv() => break false,
         }
     };
     stop.store(true, Ordering::Relaxed);
@@ -235,4 +234,45 @@ async fn save_snapshot(map: &Arc<Mutex<PolygonMap>>, config: &Config) -> Result<
     };
     let snapshot = map.lock().snapshot();
     tokio::task::spawn_blocking(move || crate::map::persist::save_to(&snapshot, &path)).await?
+}
+
+/// SIGINT and SIGTERM, listened for from its making on: a signal that comes while the loop
+/// is busy elsewhere is kept for the next wait, not lost as a fresh `ctrl_c()` would lose it.
+pub struct StopSignals {
+    interrupt: tokio::signal::unix::Signal,
+    terminate: tokio::signal::unix::Signal,
+}
+
+impl StopSignals {
+    pub fn new() -> std::io::Result<StopSignals> {
+        use tokio::signal::unix::{SignalKind, signal};
+        Ok(StopSignals { interrupt: signal(SignalKind::interrupt())?, terminate: signal(SignalKind::terminate())? })
+    }
+
+    /// The next SIGINT or SIGTERM (or one that came since the last).
+    pub async fn recv(&mut self) {
+        tokio::select! {
+            _ = self.interrupt.recv() => {}
+            _ = self.terminate.recv() => {}
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::StopSignals;
+
+    /// A SIGINT that comes while nothing waits for it (the run loop busy publishing) is the
+    /// next wait's, as it was not with a `ctrl_c()` made anew on every pass.
+    #[tokio::test]
+    async fn a_signal_that_comes_between_waits_is_kept() {
+        let mut signals = StopSignals::new().unwrap();
+        for _ in 0..3 {
+            // SAFETY: raise only sends this process a signal, which `signals` takes.
+            assert_eq!(unsafe { libc::raise(libc::SIGINT) }, 0);
+            tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+            let got = tokio::time::timeout(std::time::Duration::from_secs(30), signals.recv()).await;
+            assert!(got.is_ok(), "the signal was lost");
+        }
+    }
 }

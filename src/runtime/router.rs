@@ -13,7 +13,7 @@ pub async fn run(config_file: &std::path::Path, duration: Option<Duration>) -> R
     config.insert_json5("mode", r#""router""#).map_err(|e| anyhow!("zenoh config: {e}"))?;
     let session = crate::ros2::session::open(config).await?;
     tracing::info!("Zenoh router {} up", session.zid());
-    let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+    let mut signals = super::StopSignals::new()?;
     let deadline = async {
         match duration {
             Some(d) => tokio::time::sleep(d).await,
@@ -22,8 +22,7 @@ pub async fn run(config_file: &std::path::Path, duration: Option<Duration>) -> R
     };
     tokio::select! {
         _ = deadline => {}
-        _ = tokio::signal::ctrl_c() => {}
-        _ = sigterm.recv() => {}
+        _ = signals.recv() => {}
     }
     session.close().await.map_err(|e| anyhow!("closing the router: {e}"))
 }
