@@ -473,3 +473,13 @@ fn polymap_config_checks_the_files_a_config_names() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("not a regular file"));
 }
+
+#[test]
+fn a_map_kilometres_long_and_a_metre_wide_is_drawn() {
+    // A phantom's polygons 9 km out beside the stair: the picture is one pixel high, not none.
+    let long = snapshot_with(vec![[0.0, 0.0, 0.0], [9000.0, 0.0, 0.0], [9000.0, 0.05, 0.0], [0.0, 0.05, 0.0]]);
+    let img = polymap::map::render::top_down(&long, None);
+    assert!(img.width() >= 100 && img.height() >= 1, "{}x{}", img.width(), img.height());
+    let dir = tempfile::tempdir().unwrap();
+    img.save(dir.path().join("map.png")).unwrap();
+}

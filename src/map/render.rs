@@ -42,7 +42,9 @@ pub fn top_down(map: &MapSnapshot, truth: Option<&Truth>) -> RgbImage {
     }
     let margin = 0.1;
     let scale = (MAX_SIDE / (hi[0] - lo[0] + 2.0 * margin).max(hi[1] - lo[1] + 2.0 * margin)).min(400.0);
-    let (w, h) = (((hi[0] - lo[0] + 2.0 * margin) * scale) as u32, ((hi[1] - lo[1] + 2.0 * margin) * scale) as u32);
+    // At least a pixel each way: a map kilometres long and a metre wide is one pixel high.
+    let side = |extent: f64| (((extent + 2.0 * margin) * scale) as u32).max(1);
+    let (w, h) = (side(hi[0] - lo[0]), side(hi[1] - lo[1]));
     let to_px = |p: &[f64; 3]| [(p[0] - lo[0] + margin) * scale, (hi[1] + margin - p[1]) * scale];
     let mut img = RgbImage::from_pixel(w, h, BACKGROUND);
 
