@@ -190,19 +190,31 @@ impl Track {
         if gap > max_gap_ns {
             return Err(NoPose::Gap { stamp_ns, gap_ms: gap as f64 * 1e-6, max_ms: max_gap_ns as f64 * 1e-6 });
         }
-        let dt = gap as f64 * 1e-9;
-        let speed = (b.transform.translation.vector - a.transform.translation.vector).norm() / dt;
-        let turn = a.transform.rotation.angle_to(&b.transform.rotation) / dt;
-        if speed > MAX_SPEED_M_S || turn > MAX_TURN_RAD_S {
-            return Err(NoPose::Jump { stamp_ns, speed, turn });
-        }
+        jumped(a, b, stamp_ns)?;
         Ok(blend(&a.transform, &b.transform, (stamp_ns - a.stamp_ns) as f64 / gap as f64))
     }
 
-    /// The newest pose at or before `stamp_ns`.
-    fn at_or_before(&self, stamp_ns: StampNs) -> Option<&Pose> {
+    /// The newest pose at or before `stamp_ns`, unless it jumped from the one before it
+    /// (however long before: a restart clears the track): a single wild pose must not pose
+    /// the frames after it.
+    fn settled_at_or_before(&self, stamp_ns: StampNs) -> Result<&Pose, NoPose> {
         let i = self.poses.partition_point(|p| p.stamp_ns <= stamp_ns);
-        i.checked_sub(1).map(|i| &self.poses[i])
+        let last = i.checked_sub(1).map(|i| &self.poses[i]).ok_or(NoPose::Empty)?;
+        match i.checked_sub(2).map(|i| &self.poses[i]) {
+            Some(before) => jumped(before, last, stamp_ns).map(|_| last),
+            None => Ok(last),
+        }
+    }
+}
+
+/// A jump between two poses (faster than anything walks or turns), for a frame at `stamp_ns`.
+fn jumped(a: &Pose, b: &Pose, stamp_ns: StampNs) -> Result<(), NoPose> {
+    let dt = (b.stamp_ns - a.stamp_ns) as f64 * 1e-9;
+    let speed = (b.transform.translation.vector - a.transform.translation.vector).norm() / dt;
+    let turn = a.transform.rotation.angle_to(&b.transform.rotation) / dt;
+    match speed > MAX_SPEED_M_S || turn > MAX_TURN_RAD_S {
+        true => Err(NoPose::Jump { stamp_ns, speed, turn }),
+        false => Ok(()),
     }
 }
 
@@ -312,11 +324,8 @@ impl PoseBuffer {
         let max_gap = self.limits.max_gap_ns;
         match self.optimised.at(stamp_ns, max_gap) {
             Ok(straight) => Ok(self.densified(stamp_ns).unwrap_or(straight)),
-            Err(NoPose::NotYet { last_ns, .. })
-                if stamp_ns - last_ns <= max_gap
-                    && let Some(pose) = self.propagated_after(stamp_ns) =>
-            {
-                Ok(pose)
+            Err(e @ NoPose::NotYet { last_ns, .. }) if stamp_ns - last_ns <= max_gap => {
+                self.propagated_after(stamp_ns).unwrap_or(Err(e))
             }
             Err(e) => Err(e),
         }
@@ -343,11 +352,14 @@ impl PoseBuffer {
         Some(blend(&ca, &cb, t) * propagated)
     }
 
-    /// After the newest optimised pose: the propagated pose, corrected by its offset.
-    fn propagated_after(&self, stamp_ns: StampNs) -> Option<Isometry3<f64>> {
+    /// After the newest optimised pose: the propagated pose, corrected by that pose's offset
+    /// (None: no propagated pose to carry it; a jump into that pose: no pose).
+    fn propagated_after(&self, stamp_ns: StampNs) -> Option<Result<Isometry3<f64>, NoPose>> {
         let propagated = self.propagated.at(stamp_ns, MAX_PROPAGATED_GAP_NS).ok()?;
-        let last = self.optimised.at_or_before(stamp_ns)?;
-        Some(self.correction(last)? * propagated)
+        match self.optimised.settled_at_or_before(stamp_ns) {
+            Ok(last) => Some(Ok(self.correction(last)? * propagated)),
+            Err(jump) => Some(Err(jump)),
+        }
     }
 
     /// Counts a frame that ended without a pose.

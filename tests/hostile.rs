@@ -96,10 +96,11 @@ fn last_status(stderr: &str) -> std::collections::HashMap<String, u64> {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn implausible_poses_on_the_wire_are_refused_and_the_real_odometry_keeps_mapping() {
     let dir = tempfile::tempdir().unwrap();
+    let saved = dir.path().join("map.json");
     let port = free_loopback_port().unwrap();
     let mapper = Command::new(bin())
         .args(["run", "--duration", "14", "--config"])
-        .arg(mapper_config(dir.path(), port, 8, ""))
+        .arg(mapper_config(dir.path(), port, 8, &format!("[map]\nsnapshot_path = {:?}\n", saved.display().to_string())))
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -138,7 +139,12 @@ async fn implausible_poses_on_the_wire_are_refused_and_the_real_odometry_keeps_m
             publisher.put(&convert::odometry(&raw, "world", "body")).await.unwrap();
             sent += 1;
         }
-        let _ = round;
+        if round == 10 {
+            // One plausible pose 9 km away, stamped ahead of the odometry: the frames after it
+            // would be posed by the propagated poses through it.
+            let phantom = RawPose { stamp_ns: now + 400_000_000, position: [9000.0, 0.0, 1.0], quat_xyzw: id };
+            publisher.put(&convert::odometry(&phantom, "world", "body")).await.unwrap();
+        }
         tokio::time::sleep(Duration::from_millis(200)).await;
     }
     let out = tokio::task::spawn_blocking(move || mapper.wait_with_output()).await.unwrap().unwrap();
@@ -154,6 +160,14 @@ async fn implausible_poses_on_the_wire_are_refused_and_the_real_odometry_keeps_m
     let summary = String::from_utf8_lossy(&out.stdout);
     assert!(processed_after >= 30, "{status:?}\n{summary}");
     assert!(stderr.contains("beyond the 10000 m") && stderr.contains("ahead of this machine's clock"), "{stderr}");
+    // Nothing of the phantom in the map: every polygon near the stair.
+    let map: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&saved).unwrap()).unwrap();
+    let polygons = map["polygons"].as_array().unwrap();
+    assert!(polygons.len() >= 5, "{}", polygons.len());
+    for p in polygons {
+        let c = &p["centroid"];
+        assert!(c[0].as_f64().unwrap().abs() < 50.0 && c[1].as_f64().unwrap().abs() < 50.0, "a polygon at {c}");
+    }
 }
 
 fn snapshot_with(boundary: Vec<[f64; 3]>) -> MapSnapshot {
