@@ -581,6 +581,8 @@ pub struct Ros1Config {
     /// markers, visualization_msgs/MarkerArray), for nodes written for it; None: not sent.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub polygon_markers: Option<RosName>,
+    /// Their frame and what goes on them (`[ros1.drop_in]`).
+    pub drop_in: crate::interface::drop_in::DropInConfig,
     /// Where the D435i's IR images and IMU go, as realsense-ros (ROS 1) names them.
     pub camera_namespace: RosName,
     /// Where the transform from the map frame to VINS's goes (the frames are `[ros2]`'s:
@@ -598,6 +600,7 @@ impl Default for Ros1Config {
             odometry_type: OdometryType::Odometry,
             imu_propagate: Some(name("/vins_estimator/imu_propagate")),
             polygon_markers: Some(name("/polygon_new_markers")),
+            drop_in: Default::default(),
             camera_namespace: name("/camera"),
             tf_topic: name("/tf"),
         }
@@ -795,17 +798,8 @@ impl Config {
         if !node_name_ok {
             return Err(("ros2.node".into(), format!("{:?} is not a ROS node name (letters, digits and '_')", r.node)));
         }
-        for (key, frame) in [("ros2.map_frame", &r.map_frame), ("ros2.odometry_frame", &r.odometry_frame)] {
-            let ok = !frame.is_empty()
-                && !frame.starts_with('/')
-                && frame.chars().all(|c| c.is_ascii_alphanumeric() || "_-/.".contains(c));
-            if !ok {
-                return Err((
-                    key.into(),
-                    format!("{frame:?} is not a tf2 frame id (letters, digits, '_-/.', no leading '/')"),
-                ));
-            }
-        }
+        check_frame_id("ros2.map_frame", &r.map_frame)?;
+        check_frame_id("ros2.odometry_frame", &r.odometry_frame)?;
         if r.map_frame == r.odometry_frame {
             return Err((
                 "ros2.map_frame".into(),
@@ -815,6 +809,7 @@ impl Config {
         if self.ros1.node.as_str() == "/" {
             return Err(("ros1.node".into(), "\"/\" is a namespace, not a node name (e.g. \"/polymap\")".into()));
         }
+        self.ros1.drop_in.validate()?;
         check_range("ros2.whole_map_period_s", r.whole_map_period_s, 0.01, 3600.0)?;
         let t = &self.planar_terrain;
         check_range("planar_terrain.period_s", t.period_s, 0.01, 3600.0)?;
@@ -886,10 +881,16 @@ fn one_line(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
-fn check_range(key: &str, v: f64, lo: f64, hi: f64) -> Result<(), Invalid> {
-    if v.is_finite() && (lo..=hi).contains(&v) {
-        Ok(())
-    } else {
-        Err((key.into(), format!("{v} must be within [{lo}, {hi}]")))
-    }
+/// A tf2 frame id: letters, digits, `_-/.`, not empty, no leading `/`.
+pub fn check_frame_id(key: &str, frame: &str) -> Result<(), Invalid> {
+    let ok = !frame.is_empty()
+        && !frame.starts_with('/')
+        && frame.chars().all(|c| c.is_ascii_alphanumeric() || "_-/.".contains(c));
+    let why = || format!("{frame:?} is not a tf2 frame id (letters, digits, '_-/.', no leading '/')");
+    if ok { Ok(()) } else { Err((key.into(), why())) }
+}
+
+pub fn check_range(key: &str, v: f64, lo: f64, hi: f64) -> Result<(), Invalid> {
+    let ok = v.is_finite() && (lo..=hi).contains(&v);
+    if ok { Ok(()) } else { Err((key.into(), format!("{v} must be within [{lo}, {hi}]"))) }
 }

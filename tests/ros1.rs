@@ -254,50 +254,64 @@ fn a_rospy_node_receives_every_topic_feeds_odometry_and_calls_the_services() {
     let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
     eprintln!("{}", serde_json::to_string_pretty(&v).unwrap());
 
-    // The paper authors' topic: closed LINE_STRIPs in the map frame, at the stairs' heights.
+    // The paper authors' topic as the vendor's stair planner reads it (README "ROS 1",
+    // tests/peer/ros1_peer.py): closed LINE_STRIPs in the robot's odom frame, whose z = 0 is the
+    // soles (here the mock world's floor: the default origin), level treads only, each as
+    // four corners and the closing point.
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(root().join("mock_frames/straight_320/truth.json")).unwrap())
+            .unwrap();
+    let (rise, steps_in_stair) = (truth["stair"]["rise"].as_f64().unwrap(), truth["stair"]["steps"].as_i64().unwrap());
     let strips = v["polygon_new_markers"].as_array().unwrap();
     assert!(strips.len() >= 20, "{} strips on /polygon_new_markers", strips.len());
     for s in strips {
         assert_eq!(s["type"], 4, "LINE_STRIP: {s}");
         assert_eq!(s["ns"], "polygons_new");
-        assert_eq!(s["frame"], "map");
+        assert_eq!(s["frame"], "odom");
         assert_eq!(s["closed"], true, "a closed outline: {s}");
+        assert_eq!(s["points"], 5, "four corners and the closing point: {s}");
+        assert!(s["z_spread"].as_f64().unwrap() < 0.02, "no riser or wall: {s}");
         assert!((s["lifetime"].as_f64().unwrap() - 0.5).abs() < 1e-9);
         assert_eq!(s["w"], 1.0);
     }
-    // Level strips sit on the bundled stairs' treads: z a multiple of the 0.15 m rise.
-    let levels: Vec<f64> = strips
-        .iter()
-        .filter(|s| s["z_spread"].as_f64().unwrap() < 0.02)
-        .map(|s| s["z_mean"].as_f64().unwrap())
-        .collect();
-    assert!(levels.len() >= 10, "level strips: {levels:?}");
-    let mut steps: Vec<i64> = Vec::new();
-    for z in &levels {
-        let k = (z / 0.15).round();
-        assert!((z - k * 0.15).abs() < 0.03, "a level strip at z {z:.3} is on no tread");
-        steps.push(k as i64);
+    // Each array as the planner walks it, in message order: every tread it keeps within 5 mm
+    // of a tread of the truth, none refused by its chain, no floor, and a staircase wherever
+    // it keeps two or more.
+    let readings = v["planner_readings"].as_array().unwrap();
+    let mut chained = std::collections::BTreeSet::new();
+    let (mut worst_mm, mut staircases) = (0.0f64, 0);
+    for r in readings {
+        let skipped = &r["skipped"];
+        for why in ["few_points", "at_the_soles", "off_the_chain"] {
+            assert_eq!(skipped[why], 0, "{why}: {r}");
+        }
+        let steps = r["steps"].as_array().unwrap();
+        for step in steps {
+            let z = step["z"].as_f64().unwrap();
+            let k = (z / rise).round() as i64;
+            assert!((1..=steps_in_stair).contains(&k), "a step at z {z:.3} on no tread: {r}");
+            worst_mm = worst_mm.max((z - k as f64 * rise).abs() * 1e3);
+            chained.insert(k);
+        }
+        if steps.len() >= 2 {
+            assert_eq!(r["staircase"], true, "a staircase: {r}");
+            staircases += 1;
+        }
     }
-    steps.sort();
-    steps.dedup();
-    assert!(steps.len() >= 3, "strips on treads {steps:?}");
-    // The vendor's stair planner takes a marker's first four points as a tread's corners:
-    // level outlines arrive as their corners (the mapped ones have 19 to 97 vertices), a
-    // tread seen whole as 4 and the closing point; one the view cuts has a corner more.
-    let mut corners: Vec<(i64, u64)> = strips
-        .iter()
-        .filter(|s| s["z_spread"].as_f64().unwrap() < 0.02)
-        .map(|s| ((s["z_mean"].as_f64().unwrap() / 0.15).round() as i64, s["points"].as_u64().unwrap() - 1))
+    eprintln!(
+        "planner: {} arrays, {staircases} staircases, treads {chained:?}, worst height {worst_mm:.1} mm",
+        readings.len()
+    );
+    assert!(worst_mm <= 5.0, "a tread {worst_mm:.1} mm off its height");
+    assert!(staircases * 2 >= readings.len(), "{staircases} staircases in {} arrays", readings.len());
+    // Every tread the camera saw deep enough for the planner (its mapped outline a tread's
+    // going front to back) is chained in some array.
+    let seen: std::collections::BTreeSet<i64> = (v["get_map"]["tread_extents"].as_array().unwrap().iter())
+        .filter(|e| e[1].as_f64().unwrap() >= 0.9 * truth["stair"]["going"].as_f64().unwrap())
+        .map(|e| (e[0].as_f64().unwrap() / rise).round() as i64)
         .collect();
-    corners.sort();
-    eprintln!("level outlines (tread, corners): {corners:?}");
-    assert!(corners.iter().all(|&(_, n)| (3..=16).contains(&n)), "{corners:?}");
-    let mut counts: Vec<u64> = corners.iter().map(|&(_, n)| n).collect();
-    counts.sort();
-    assert!(counts[counts.len() / 2] <= 6, "median corners {}: {corners:?}", counts[counts.len() / 2]);
-    let mut four_on: Vec<i64> = corners.iter().filter(|&&(_, n)| n == 4).map(|&(k, _)| k).collect();
-    four_on.dedup();
-    assert!(four_on.len() >= 3, "4-corner outlines on treads {four_on:?}");
+    assert!(seen.len() >= 3, "treads seen whole: {seen:?}");
+    assert!(seen.is_subset(&chained), "treads seen {seen:?}, chained {chained:?}");
 
     // Every other topic arrived.
     let counts = &v["counts"];

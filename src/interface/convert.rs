@@ -217,7 +217,7 @@ pub const MARKER_DELETEALL: i32 = 3;
 /// The namespace polymap's markers live in.
 pub const MARKER_NS: &str = "polymap";
 
-fn marker(header: &Header, id: u64, action: i32) -> Marker {
+pub(super) fn marker(header: &Header, id: u64, action: i32) -> Marker {
     Marker {
         header: header.clone(),
         ns: MARKER_NS.into(),
@@ -262,58 +262,6 @@ pub fn markers(header: &Header, polygons: &[&msg::Polygon], removed: &[u64]) -> 
         .collect();
     markers.extend(removed.iter().map(|&id| marker(header, id, MARKER_DELETE)));
     MarkerArray { markers }
-}
-
-/// A frame's polygons as the paper authors' ROS 1 node sends them on `/polygon_new_markers`:
-/// one blue LINE_STRIP per steppable polygon (id its index among them, ns `polygons_new`, living
-/// 0.5 s, 5 cm wide), its outline closed by the first vertex again. Level outlines are
-/// simplified to their corners ([`corner_outline`]): the vendor's stair planner takes a
-/// marker's first four points as a tread's corners.
-pub fn polygon_new_markers(frame: &FramePolygons) -> MarkerArray {
-    // The vendor's planner steps on what it gets: only steppable polygons.
-    let markers = (frame.polygons.iter())
-        .filter(|p| p.steppable)
-        .enumerate()
-        .map(|(i, p)| {
-            let mut m = marker(&frame.header, i as u64, MARKER_ADD);
-            m.ns = "polygons_new".into();
-            m.lifetime = Duration { sec: 0, nanosec: 500_000_000 };
-            m.scale.x = 0.05;
-            m.color = ColorRgba { r: 0.0, g: 0.0, b: 1.0, a: 1.0 };
-            m.pose.orientation.w = 1.0;
-            m.points = match p.normal[2] > LEVEL_NORMAL_Z {
-                true => corner_outline(&p.boundary),
-                false => p.boundary.clone(),
-            };
-            m.points.extend(m.points.first().copied());
-            m
-        })
-        .collect();
-    MarkerArray { markers }
-}
-
-/// A polygon is level for the authors' topic when its normal is within about 25 degrees of up.
-const LEVEL_NORMAL_Z: f64 = 0.9;
-/// How far a level outline's corners-only form may stray from it, m: the mapped outline's
-/// ragged edges are within this of a tread's straight ones.
-const CORNER_TOLERANCE_M: f64 = 0.02;
-
-/// A level outline as its corners (Ramer-Douglas-Peucker in x-y), starting at the vertex
-/// farthest from its centre, which is a corner: a rectangular tread comes out as 4 points.
-pub fn corner_outline(boundary: &[Point]) -> Vec<Point> {
-    use geo::SimplifyIdx;
-    let n = boundary.len();
-    if n < 4 {
-        return boundary.to_vec();
-    }
-    let (cx, cy) = boundary.iter().fold((0.0, 0.0), |(x, y), p| (x + p.x / n as f64, y + p.y / n as f64));
-    let d2 = |p: &Point| (p.x - cx).powi(2) + (p.y - cy).powi(2);
-    let start = (0..n).max_by(|&a, &b| d2(&boundary[a]).total_cmp(&d2(&boundary[b]))).unwrap_or(0);
-    let ring: Vec<Point> = (0..=n).map(|k| boundary[(start + k) % n]).collect();
-    let line: geo::LineString<f64> = ring.iter().map(|p| geo::Coord { x: p.x, y: p.y }).collect();
-    let kept = line.simplify_idx(CORNER_TOLERANCE_M);
-    // The last index is the start again.
-    kept[..kept.len().saturating_sub(1)].iter().map(|&i| ring[i]).collect()
 }
 
 /// The whole map's markers: a DELETEALL (so a viewer keeps nothing of an older map), then
@@ -494,36 +442,8 @@ pub fn odometry(pose: &RawPose, frame_id: &str, child_frame_id: &str) -> Odometr
 mod tests {
     use super::*;
 
-    /// A tread's mapped outline: a 0.6 x 0.28 m rectangle traced from mid-edge, every 2 cm,
-    /// with up to 8 mm of raggedness.
     #[test]
-    fn a_ragged_rectangle_comes_out_as_its_four_corners() {
-        let corners: [[f64; 2]; 4] = [[0.0, 0.0], [0.28, 0.0], [0.28, 0.6], [0.0, 0.6]];
-        let mut boundary = Vec::new();
-        for k in 0..4 {
-            let (a, b) = (corners[k], corners[(k + 1) % 4]);
-            let steps = ((b[0] - a[0]).hypot(b[1] - a[1]) / 0.02).round() as usize;
-            for s in 0..steps {
-                let t = s as f64 / steps as f64;
-                let wobble = 0.008 * ((s * 7 + k) as f64).sin();
-                let (dx, dy) = ((b[1] - a[1]) / 0.6_f64.max(0.28), -(b[0] - a[0]) / 0.6_f64.max(0.28));
-                boundary.push(Point {
-                    x: a[0] + t * (b[0] - a[0]) + wobble * dx * (s > 0) as u8 as f64,
-                    y: a[1] + t * (b[1] - a[1]) + wobble * dy * (s > 0) as u8 as f64,
-                    z: 0.3,
-                });
-            }
-        }
-        boundary.rotate_left(5); // start mid-edge
-        let out = corner_outline(&boundary);
-        assert_eq!(out.len(), 4, "{out:?}");
-        for c in corners {
-            assert!(out.iter().any(|p| (p.x - c[0]).hypot(p.y - c[1]) < 1e-9), "corner {c:?} in {out:?}");
-        }
-    }
-
-    #[test]
-    fn only_steppable_polygons_reach_the_vendor_topic_and_footing_round_trips() {
+    fn footing_round_trips_and_only_steppable_polygons_are_marked_so() {
         let square = |z: f64, footing: Footing| crate::extract::Polygon {
             id: 0,
             normal: [0.0, 0.0, 1.0],
@@ -550,9 +470,6 @@ mod tests {
                 (false, msg::Polygon::FOOTING_FEW_PIXELS)
             ]
         );
-        let strips = polygon_new_markers(&frame).markers;
-        assert_eq!(strips.len(), 1, "only the steppable one");
-        assert!(strips[0].points.iter().all(|p| p.z == 0.1) && strips[0].id == 0);
         for f in [Footing::Steppable, Footing::TiltUnknown, Footing::FewPixels] {
             assert_eq!(footing_of(footing_code(f)), Some(f));
         }

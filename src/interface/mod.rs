@@ -4,6 +4,7 @@
 //! all take names from here.
 
 pub mod convert;
+pub mod drop_in;
 pub mod follower;
 pub mod terrain;
 pub mod wires;

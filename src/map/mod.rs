@@ -211,6 +211,7 @@ impl PolygonMap {
             update.drift_measured = self.measure_drift(&valid, t_world_camera, intrinsics);
         }
         let touched = self.merge_frame(&valid, t_world_camera, intrinsics, &mut update);
+        update.placed = valid.iter().map(|p| p.id).zip(touched.iter().copied()).collect();
         if let Some(depth_m) = depth_m {
             self.clear_contradicted(&touched, t_world_camera, depth_m, intrinsics, &mut update);
         }
@@ -310,6 +311,8 @@ impl PolygonMap {
                     for other in &matches[1..] {
                         self.absorb(id, other.id);
                         update.removed.push(other.id);
+                        // An earlier polygon of this frame that went into it went into `id`.
+                        touched.iter_mut().filter(|t| **t == other.id).for_each(|t| *t = id);
                     }
                     self.merge(id, &o);
                     update.changed.push(id);
@@ -335,5 +338,10 @@ impl PolygonMap {
 
     pub fn ids(&self) -> Vec<u64> {
         self.entries.keys().copied().collect()
+    }
+
+    /// Map polygon `id`'s label, if the map holds it.
+    pub fn label(&self, id: u64) -> Option<Label> {
+        self.entries.contains_key(&id).then(|| self.label_table.labelled(id).0)
     }
 }

@@ -92,6 +92,8 @@ pub struct MapUpdate {
     pub added: Vec<u64>,
     pub changed: Vec<u64>,
     pub removed: Vec<u64>,
+    /// Where each of the frame's polygons went: (its id in the frame, the map polygon's id).
+    pub placed: Vec<(u32, u64)>,
     /// The drift this frame measured (before filtering), m.
     pub drift_measured: Option<f64>,
     /// What was refused, each with why.

@@ -3,13 +3,14 @@
 //! When the map changed, at most every period: the whole map and its markers (transient
 //! local: a late subscriber gets the latest at once), and the planar terrain around the robot.
 //! Each goes out on ROS 2 and, when enabled, ROS 1 ([`Wires`]); ROS 1 also gets each frame's
-//! polygons as the paper authors' node sends them.
+//! treads as the vendor's stair planner reads the paper authors' topic ([`drop_in`]).
 
 use parking_lot::Mutex;
 
 use super::status::Report;
 use super::worker::FrameEvent;
 use crate::config::{Config, PlanarTerrainConfig};
+use crate::interface::drop_in::{self, DropInConfig};
 use crate::interface::wires::{Out, WireError, Wires};
 use crate::interface::{convert, terrain};
 use crate::map::PolygonMap;
@@ -24,8 +25,9 @@ pub struct Publishers {
     tf: Out<TfMessage>,
     planar_terrain: Option<Out<PlanarTerrain>>,
     status: Out<Status>,
-    /// ROS 1's `/polygon_new_markers`.
+    /// ROS 1's `/polygon_new_markers`, and what goes on it.
     polygon_markers: Out<MarkerArray>,
+    drop_in: DropInConfig,
     /// This run of the mapper (its start, ns): versions count within it.
     epoch: u64,
     map_frame: String,
@@ -50,6 +52,7 @@ impl Publishers {
             },
             status: wires.publisher(|i| Some(&i.status)).await?,
             polygon_markers: wires.publisher(|i| i.polygon_markers.as_ref()).await?,
+            drop_in: config.ros1.drop_in.clone(),
             epoch,
             map_frame: config.ros2.map_frame.clone(),
             odometry_frame: config.ros2.odometry_frame.clone(),
@@ -61,10 +64,11 @@ impl Publishers {
 
     /// A frame's polygons, the map update it made, and the drift it left.
     pub async fn frame(&self, e: &FrameEvent) -> Result<(), WireError> {
-        let polygons = convert::frame_polygons(e.stamp_ns, &self.map_frame, &e.polygons);
         if self.polygon_markers.wanted() {
-            self.polygon_markers.put(&convert::polygon_new_markers(&polygons)).await?;
+            let markers = drop_in::polygon_new_markers(e.stamp_ns, &e.polygons, &e.labels, e.robot, &self.drop_in);
+            self.polygon_markers.put(&markers).await?;
         }
+        let polygons = convert::frame_polygons(e.stamp_ns, &self.map_frame, &e.polygons);
         self.frame_polygons.put(&polygons).await?;
         let delta = convert::MapDelta {
             stamp_ns: e.stamp_ns,

@@ -26,7 +26,7 @@ use crate::clock::now_ns;
 use crate::config::{Backend, Config};
 use crate::extract::{Extraction, Extractor, FramePolygons, Polygon};
 use crate::grid::Grid;
-use crate::map::{MapPolygon, PolygonMap};
+use crate::map::{Label, MapPolygon, PolygonMap};
 use crate::pose::PoseBuffer;
 use crate::types::{DepthFrame, Intrinsics, Pose, StampNs};
 
@@ -39,6 +39,8 @@ pub struct FrameEvent {
     /// Where the robot (the odometry's body) was, in the map's frame.
     pub robot: [f64; 3],
     pub polygons: Vec<Polygon>,
+    /// Each polygon's label in the map it went into (None: it did not go in).
+    pub labels: Vec<Option<Label>>,
     pub added: Vec<MapPolygon>,
     pub changed: Vec<MapPolygon>,
     pub removed: Vec<u64>,
@@ -299,6 +301,9 @@ fn update_map(
     let corrected = m.corrected(t_world_camera);
     let robot = m.corrected(world_body).translation.vector;
     let version = m.version();
+    let labels = (frame.polygons.polygons.iter())
+        .map(|p| update.placed.iter().find(|(frame_id, _)| *frame_id == p.id).and_then(|&(_, id)| m.label(id)))
+        .collect();
     let mut polygons_of = |ids: &[u64]| ids.iter().filter_map(|&id| m.polygon(id)).collect::<Vec<_>>();
     FrameEvent {
         stamp_ns: frame.polygons.stamp_ns,
@@ -306,6 +311,7 @@ fn update_map(
         version,
         robot: [robot.x, robot.y, robot.z],
         polygons: frame.polygons.polygons.iter().map(|p| p.transformed(&corrected)).collect(),
+        labels,
         added: polygons_of(&update.added),
         changed: polygons_of(&update.changed),
         removed: update.removed,

@@ -71,7 +71,7 @@ class Stream:
 
 
 def strip_summary(array):
-    """The vendor planner's view of /polygon_new_markers: closed strips, their heights."""
+    """What each marker of one /polygon_new_markers array is, as a viewer sees it."""
     out = []
     for m in array.markers:
         pts = m.points
@@ -83,6 +83,35 @@ def strip_summary(array):
             "z_spread": (max(zs) - min(zs)) if zs else None, "scale": m.scale.x, "w": m.pose.orientation.w,
         })
     return out
+
+
+def planner_reading(array):
+    """One array as the vendor's stair planner reads it: markers in message
+    order, never sorted (README "ROS 1"); fewer than 5 points skipped; the first 4 points a tread's corners, its
+    front edge the mean x of the two of least x, its back the other two's; shallower than 0.2 m
+    dropped; its height the mean z of the corners, absolute (odom, z = 0 at the soles), kept if
+    |z| > 0.03 and, after the first, less than 0.4 m ahead and 0.18 m above the step before.
+    A staircase: consecutive steps rising 0.08-0.18 m and advancing 0.2-0.4 m."""
+    steps, skipped = [], {"few_points": 0, "shallow": 0, "at_the_soles": 0, "off_the_chain": 0}
+    for m in array.markers:
+        if len(m.points) < 5:
+            skipped["few_points"] += 1
+            continue
+        corners = sorted(m.points[:4], key=lambda p: p.x)
+        front = (corners[0].x + corners[1].x) / 2
+        back = (corners[2].x + corners[3].x) / 2
+        z = sum(p.z for p in corners) / 4
+        if back - front < 0.2:
+            skipped["shallow"] += 1
+        elif abs(z) <= 0.03:
+            skipped["at_the_soles"] += 1
+        elif steps and not (front - steps[-1]["front"] < 0.4 and z - steps[-1]["z"] < 0.18):
+            skipped["off_the_chain"] += 1
+        else:
+            steps.append({"front": front, "back": back, "z": z})
+    staircase = len(steps) >= 2 and all(
+        0.08 <= b["z"] - a["z"] <= 0.18 and 0.2 <= b["front"] - a["front"] <= 0.4 for a, b in zip(steps, steps[1:]))
+    return {"markers": len(array.markers), "skipped": skipped, "steps": steps, "staircase": staircase}
 
 
 def odometry(stamp_ns, p, q):
@@ -106,6 +135,7 @@ def main():
     lock = threading.Lock()
 
     strips = []  # every strip of every /polygon_new_markers array
+    readings = []  # the vendor planner's reading of each array
 
     def taker(name):
         def take(msg):
@@ -113,6 +143,7 @@ def main():
                 streams[name].take(msg)
                 if name == "/polygon_new_markers":
                     strips.extend(strip_summary(msg))
+                    readings.append(planner_reading(msg))
         return take
 
     subs = [rospy.Subscriber(name, ty, taker(name), queue_size=100) for name, ty in TOPICS.items()]
@@ -176,6 +207,7 @@ def main():
             "absurd_published": len(absurd),
             "counts": {n: st.count for n, st in s.items()},
             "polygon_new_markers": strips,
+            "planner_readings": readings,
             "frame_polygons_frame": s[f"{NS}/frame_polygons"].last.header.frame_id if s[f"{NS}/frame_polygons"].last else None,
             "status_early": status_early,
             "status_during": status_during,
@@ -202,6 +234,9 @@ def main():
                              "after_s": None if late["markers"].first_at is None else late["markers"].first_at - joined},
             "seconds_since_odometry": joined - stopped_at,
             "get_map": {"polygons": len(whole.polygons), "treads": sum(1 for p in whole.polygons if p.label == 2),
+                        # Each steppable tread's height and depth (front to back), map frame.
+                        "tread_extents": [[p.centroid.z, max(v.x for v in p.boundary) - min(v.x for v in p.boundary)]
+                                          for p in whole.polygons if p.label == 2 and p.steppable],
                         "steppable_treads": sum(1 for p in whole.polygons if p.label == 2 and p.steppable),
                         # genpy's own constants: steppable says footing is FOOTING_STEPPABLE.
                         "footing_consistent": all(p.steppable == (p.footing == Polygon.FOOTING_STEPPABLE) and
