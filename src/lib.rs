@@ -51,3 +51,13 @@ pub fn keep_freed_memory() {
         libc::mallopt(libc::M_TRIM_THRESHOLD, 1 << 30);
     }
 }
+
+/// Gives the memory freed since the last call back to the system (glibc's malloc keeps it,
+/// [`keep_freed_memory`]): after a burst of large messages from peers, say.
+pub fn give_back_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only returns free pages to the kernel; it is safe to call at any time.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}

@@ -158,9 +158,9 @@ fn mock_sources() -> String {
 
 /// `polymap run` with `[ros1] enabled`, `sources` (TOML), the CPU twin, ROS 2 on a Zenoh
 /// port of its own; its log in `dir/mapper.log`.
-fn mapper(core: &Roscore, dir: &Path, seconds: u32, sources: &str) -> Child {
+fn mapper(core: &Roscore, dir: &Path, seconds: u32, sources: &str, zenoh_port: u16) -> Child {
     let zenoh = dir.join("mapper.json5");
-    std::fs::write(&zenoh, loopback_json5(Some(free_loopback_port().unwrap()), &[])).unwrap();
+    std::fs::write(&zenoh, loopback_json5(Some(zenoh_port), &[])).unwrap();
     let config = dir.join("mapper.toml");
     std::fs::write(
         &config,
@@ -181,7 +181,7 @@ fn mapper(core: &Roscore, dir: &Path, seconds: u32, sources: &str) -> Child {
 
 /// [`mapper`] on `sources` for a minute, once the master lists it; and its log.
 fn registered_mapper(core: &Roscore, dir: &Path, sources: &str) -> (Child, std::path::PathBuf) {
-    let polymap = mapper(core, dir, 60, sources);
+    let polymap = mapper(core, dir, 60, sources, free_loopback_port().unwrap());
     let log = dir.join("mapper.log");
     wait_for_node(core, "/polymap", &log);
     (polymap, log)
@@ -549,12 +549,82 @@ fn hostile_tcpros_and_xmlrpc_peers_are_refused_counted_and_do_not_grow_memory() 
         "over the 65536-byte limit",
         "ends after",
         "claims",
-        "over the 1048576-byte limit",
-        "no connection header within",
+        "a service request of 3221225472 bytes is over the 65536-byte limit",
+        "a connection header did not arrive within",
     ] {
         assert!(log_text.contains(why), "the log says {why:?}:\n{log_text}");
     }
     assert!(after < before + 16 * 1024, "resident memory grew from {before} KiB to {after} KiB");
+}
+
+/// Peers that hold on rather than lie (tests/peer/ros1_hostile.py, rospy and raw sockets): a
+/// phantom pose 9 km away, a flood of publishers, idle service connections, a publisher that
+/// stalls its messages, a crowd of 1 MiB XML-RPC bodies. polymap keeps serving through each,
+/// bounds what each holds, gives the memory back, and maps no phantom.
+#[test]
+fn peers_that_hold_on_are_bounded_and_the_node_serves_on() {
+    let core = Roscore::start();
+    let dir = tempfile::tempdir().unwrap();
+    let saved = dir.path().join("map.json");
+    let port = free_loopback_port().unwrap();
+    let sources = format!("{}[map]\nsnapshot_path = {:?}\n", mock_sources(), saved.display().to_string());
+    let mut polymap = mapper(&core, dir.path(), 90, &sources, port);
+    let log = dir.path().join("mapper.log");
+    wait_for_node(&core, "/polymap", &log);
+    // The real odometry, with its IMU-rate propagated poses, from a mock VINS on Zenoh.
+    let vins_zenoh = dir.path().join("vins.json5");
+    std::fs::write(&vins_zenoh, loopback_json5(None, &[port])).unwrap();
+    let vins_config = dir.path().join("vins.toml");
+    std::fs::write(&vins_config, format!("[zenoh]\nconfig_file = {:?}\n", vins_zenoh.display().to_string())).unwrap();
+    let mut vins = Command::new(env!("CARGO_BIN_EXE_polymap"))
+        .args(["mock-vins", root().join("mock_frames/straight_320").to_str().unwrap(), "--duration", "85", "--config"])
+        .arg(&vins_config)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut probe = Command::new(PYTHON);
+    probe.arg(root().join("tests/peer/ros1_hostile.py")).args(["--pid", &polymap.id().to_string()]);
+    core.env(&mut probe);
+    let out = probe.output().unwrap();
+    let _ = vins.kill();
+    let _ = vins.wait();
+    stop(&mut polymap);
+    let log_text = std::fs::read_to_string(&log).unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "probe: {stdout}\n{}\n{log_text}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    eprintln!("{}", serde_json::to_string_pretty(&v).unwrap());
+    let steps = &v["steps"];
+    for (name, step) in steps.as_object().unwrap() {
+        assert_eq!(step["serving"], true, "polymap stopped serving after {name}: {step}");
+    }
+    let mib = |name: &str| steps[name]["rss_mib"].as_f64().unwrap();
+    let baseline = mib("baseline");
+    // The phantom pose: no polygon 9 km out, in the map served or saved.
+    let map: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&saved).unwrap()).unwrap();
+    for p in map["polygons"].as_array().unwrap() {
+        assert!(p["centroid"][0].as_f64().unwrap().abs() < 50.0, "a phantom polygon at {}", p["centroid"]);
+    }
+    // The flood of publishers: a topic takes 16 at most, refused and counted past them.
+    let inbound = steps["publisher_flood"]["inbound"].as_u64().unwrap();
+    assert!(inbound <= polymap::ros1::node::MAX_PUBLISHERS_PER_TOPIC as u64, "{inbound} publishers taken");
+    assert!(log_text.contains("more publishers of /vins_estimator/odometry than the 16 taken"), "{log_text}");
+    // Idle service connections are closed once their request is overdue; a 1 MiB request at once.
+    assert_eq!(steps["idle_services"]["closed"], 300, "{}", steps["idle_services"]);
+    assert_eq!(steps["idle_services"]["big_request_closed"], true);
+    assert!(log_text.contains("a service request did not arrive within"), "{log_text}");
+    // The stalling publisher: one connection at a time whatever its URIs, each given up after
+    // its message's deadline.
+    let stalled = &steps["stalling_publisher"];
+    assert_eq!(stalled["most_open"], 1, "{stalled}");
+    assert!(stalled["connections"].as_u64().unwrap() >= 1, "{stalled}");
+    let held = stalled["held_s"].as_array().unwrap();
+    assert!(!held.is_empty() && held.iter().all(|h| h.as_f64().unwrap() < 12.0), "{stalled}");
+    // Memory: back near where it was after each.
+    for name in ["publisher_flood_restored", "idle_services", "stalling_publisher", "xmlrpc_bodies"] {
+        assert!(mib(name) < baseline + 24.0, "{name}: {:.0} MiB resident, {baseline:.0} MiB before", mib(name));
+    }
 }
 
 /// `polymap demo --ros1` against `roscore`, by the README's commands as written: the master

@@ -22,7 +22,7 @@ use super::tcpros::{self, ConnectionHeader, TcprosError};
 use super::types::{Ros1Message, Ros1Service, TypeInfo};
 use super::xmlrpc::{self, Value};
 use super::{NodeOptions, Ros1Error};
-use crate::ros2::cdr::{CdrError, MAX_MESSAGE_BYTES};
+use crate::ros2::cdr::CdrError;
 use crate::ros2::{Service, Topic};
 
 type Frame = Arc<Vec<u8>>;
@@ -49,8 +49,10 @@ struct Inner {
     refused: AtomicU64,
     shut_down: AtomicBool,
     next_connection: AtomicU64,
-    /// Permits for peer connections open at once.
-    peers: Arc<tokio::sync::Semaphore>,
+    /// Permits for peer connections open at once: XML-RPC calls and TCPROS connections
+    /// apart, so a crowd on one side does not lock the master out of the other.
+    xmlrpc_peers: Arc<tokio::sync::Semaphore>,
+    tcpros_peers: Arc<tokio::sync::Semaphore>,
 }
 
 struct Publication {
@@ -78,6 +80,9 @@ struct Subscribed {
     on: OnBytes,
     /// Publishers connected (or connecting), by their XML-RPC URI.
     publishers: Mutex<HashMap<String, AbortHandle>>,
+    /// The TCPROS endpoints (host, port) streaming to it now: one connection each, however
+    /// many URIs name it.
+    endpoints: Mutex<std::collections::HashSet<(String, u16)>>,
 }
 
 #[derive(Clone)]
@@ -106,7 +111,8 @@ impl Node {
             refused: AtomicU64::new(0),
             shut_down: AtomicBool::new(false),
             next_connection: AtomicU64::new(1),
-            peers: Arc::new(tokio::sync::Semaphore::new(MAX_PEERS)),
+            xmlrpc_peers: Arc::new(tokio::sync::Semaphore::new(MAX_XMLRPC_PEERS)),
+            tcpros_peers: Arc::new(tokio::sync::Semaphore::new(MAX_TCPROS_PEERS)),
         });
         // As roscpp does: wait for the master (a robot's services start in any order).
         let mut waited = 0u64;
@@ -120,6 +126,7 @@ impl Node {
         let tasks = vec![
             tokio::spawn(serve_xmlrpc(inner.clone(), xmlrpc_listener)).abort_handle(),
             tokio::spawn(serve_tcpros(inner.clone(), tcpros_listener)).abort_handle(),
+            tokio::spawn(give_back_memory()).abort_handle(),
         ];
         Ok(Node { inner, tasks: Mutex::new(tasks) })
     }
@@ -181,6 +188,7 @@ impl Node {
             limit: T::MAX_BYTES,
             on: Arc::new(move |bytes: &[u8]| on(T::from_ros1(bytes))),
             publishers: Mutex::default(),
+            endpoints: Mutex::default(),
         });
         self.inner.subscriptions.lock().insert(subscribed.topic.clone(), subscribed.clone());
         let i = &self.inner;
@@ -423,13 +431,27 @@ fn uris(v: &Value) -> Vec<String> {
     v.as_array().unwrap_or(&[]).iter().filter_map(|u| u.as_str().map(str::to_string)).collect()
 }
 
+/// Publishers one topic takes from at once: a robot has one or two of each (VINS, a bag
+/// being played), and each is a task that retries while the master lists it.
+pub const MAX_PUBLISHERS_PER_TOPIC: usize = 16;
+
 fn connect_publishers(inner: &Arc<Inner>, s: &Arc<Subscribed>, publishers: &[String]) {
     let mut connected = s.publishers.lock();
+    let mut over = 0;
     for uri in publishers {
-        if !connected.contains_key(uri) {
-            let task = tokio::spawn(take_from(inner.clone(), s.clone(), uri.clone()));
-            connected.insert(uri.clone(), task.abort_handle());
+        if connected.contains_key(uri) {
+            continue;
         }
+        if connected.len() == MAX_PUBLISHERS_PER_TOPIC {
+            over += 1;
+            continue;
+        }
+        let task = tokio::spawn(take_from(inner.clone(), s.clone(), uri.clone()));
+        connected.insert(uri.clone(), task.abort_handle());
+    }
+    if over > 0 {
+        let why = format!("{over} more publishers of {} than the {MAX_PUBLISHERS_PER_TOPIC} taken", s.topic);
+        inner.refuse("a publisher list", &why);
     }
 }
 
@@ -442,8 +464,12 @@ async fn take_from(inner: Arc<Inner>, s: Arc<Subscribed>, uri: String) {
         let mut received = 0u64;
         let ended = stream_from(&inner, &s, &uri, &mut received).await;
         match &ended {
-            Err(Ros1Error::Tcpros(TcprosError::Io(_)) | Ros1Error::XmlRpc(_) | Ros1Error::Io(_)) => {
+            // Said once a publisher that sent something goes; its retries are quiet.
+            Err(Ros1Error::Tcpros(TcprosError::Io(_)) | Ros1Error::XmlRpc(_) | Ros1Error::Io(_)) if received > 0 => {
                 tracing::info!("ROS 1: {uri} stopped sending {} ({ended:?}); trying again", s.topic)
+            }
+            Err(Ros1Error::Tcpros(TcprosError::Io(_)) | Ros1Error::XmlRpc(_) | Ros1Error::Io(_)) => {
+                tracing::debug!("ROS 1: {uri} does not send {} ({ended:?}); trying again", s.topic)
             }
             Err(e) => inner.refuse(&format!("the publisher {uri} of {}", s.topic), e),
             Ok(()) => {}
@@ -479,6 +505,8 @@ async fn stream_from(inner: &Inner, s: &Subscribed, uri: &str, received: &mut u6
         _ => return Err(Ros1Error::Peer(format!("{uri} answered requestTopic with {answer:?}"))),
     };
     let port = u16::try_from(port).map_err(|_| Ros1Error::Peer(format!("{uri}: port {port}")))?;
+    let _endpoint = Endpoint::claim(s, (host.clone(), port))
+        .ok_or_else(|| Ros1Error::Peer(format!("{uri} names {host}:{port}, which already sends {}", s.topic)))?;
     let mut stream = TcpStream::connect((host.as_str(), port)).await?;
     stream.set_nodelay(true)?;
     let header = ConnectionHeader::new(&[
@@ -495,20 +523,51 @@ async fn stream_from(inner: &Inner, s: &Subscribed, uri: &str, received: &mut u6
         return Err(TcprosError::Refused(error.to_string()).into());
     }
     loop {
-        let frame = tcpros::read_frame(&mut stream, "a message", s.limit).await?;
+        let frame = tcpros::read_frame(&mut stream, "a message", s.limit, None).await?;
         *received += 1;
         (s.on)(&frame);
     }
 }
 
-/// Peer connections served at once, XML-RPC and TCPROS together; one more is closed at once
-/// and counted.
-const MAX_PEERS: usize = 256;
+/// A subscription's claim on one TCPROS endpoint, given up when dropped.
+struct Endpoint<'a> {
+    s: &'a Subscribed,
+    key: (String, u16),
+}
+
+impl<'a> Endpoint<'a> {
+    fn claim(s: &'a Subscribed, key: (String, u16)) -> Option<Endpoint<'a>> {
+        // Lazily: an Endpoint made and dropped for a taken key would give that key up.
+        let fresh = s.endpoints.lock().insert(key.clone());
+        fresh.then(|| Endpoint { s, key })
+    }
+}
+
+impl Drop for Endpoint<'_> {
+    fn drop(&mut self) {
+        self.s.endpoints.lock().remove(&self.key);
+    }
+}
+
+/// XML-RPC calls served at once (each has [`xmlrpc::TIMEOUT`] to arrive and be answered);
+/// one more is closed at once and counted.
+pub const MAX_XMLRPC_PEERS: usize = 64;
+/// TCPROS connections served at once (subscribers of polymap's topics, service callers).
+pub const MAX_TCPROS_PEERS: usize = 512;
+/// A service request's largest size, bytes: polymap's are a point or nothing.
+pub const MAX_REQUEST_BYTES: usize = 64 * 1024;
+/// How long a persistent service connection may wait between calls.
+pub const PERSISTENT_IDLE: Duration = Duration::from_secs(60);
 
 /// Accepts `listener`'s connections, each served by `serve` on a task of its own while
-/// fewer than [`MAX_PEERS`] are open.
-async fn accept<F, Fut>(inner: Arc<Inner>, listener: TcpListener, what: &'static str, serve: F)
-where
+/// `peers` has permits left.
+async fn accept<F, Fut>(
+    inner: Arc<Inner>,
+    listener: TcpListener,
+    peers: Arc<tokio::sync::Semaphore>,
+    what: &'static str,
+    serve: F,
+) where
     F: Fn(Arc<Inner>, TcpStream, std::net::SocketAddr) -> Fut,
     Fut: std::future::Future<Output = ()> + Send + 'static,
 {
@@ -522,7 +581,7 @@ where
                 continue;
             }
         };
-        match inner.peers.clone().try_acquire_owned() {
+        match peers.clone().try_acquire_owned() {
             Ok(permit) => {
                 let served = serve(inner.clone(), stream, peer);
                 tokio::spawn(async move {
@@ -530,13 +589,14 @@ where
                     drop(permit);
                 });
             }
-            Err(_) => inner.refuse(&format!("{what} from {peer}"), &format!("over {MAX_PEERS} peers at once")),
+            Err(_) => inner.refuse(&format!("{what} from {peer}"), &"too many at once"),
         }
     }
 }
 
 async fn serve_xmlrpc(inner: Arc<Inner>, listener: TcpListener) {
-    accept(inner, listener, "an XML-RPC call", |inner, stream, _| async move {
+    let peers = inner.xmlrpc_peers.clone();
+    accept(inner, listener, peers, "an XML-RPC call", |inner, stream, _| async move {
         if let Err(e) = xmlrpc::serve_one(stream, |method, params| inner.slave(method, params)).await {
             inner.refuse("an XML-RPC call", &e);
         }
@@ -545,7 +605,8 @@ async fn serve_xmlrpc(inner: Arc<Inner>, listener: TcpListener) {
 }
 
 async fn serve_tcpros(inner: Arc<Inner>, listener: TcpListener) {
-    accept(inner, listener, "a TCPROS connection", |inner, stream, peer| async move {
+    let peers = inner.tcpros_peers.clone();
+    accept(inner, listener, peers, "a TCPROS connection", |inner, stream, peer| async move {
         if let Err(e) = connection(&inner, stream).await {
             inner.refuse(&format!("a TCPROS connection from {peer}"), &e);
         }
@@ -598,11 +659,13 @@ async fn connection(inner: &Arc<Inner>, mut stream: TcpStream) -> Result<(), Ros
             return Ok(());
         }
         let persistent = header.get("persistent") == Some("1");
+        let mut wait = tcpros::HANDSHAKE_TIMEOUT;
         loop {
-            let request = match tcpros::read_frame(&mut stream, "a service request", MAX_MESSAGE_BYTES).await {
-                Err(TcprosError::Io(e)) if e.kind() == std::io::ErrorKind::UnexpectedEof => return Ok(()),
-                r => r?,
-            };
+            let request =
+                match tcpros::read_frame(&mut stream, "a service request", MAX_REQUEST_BYTES, Some(wait)).await {
+                    Err(TcprosError::Io(e)) if e.kind() == std::io::ErrorKind::UnexpectedEof => return Ok(()),
+                    r => r?,
+                };
             let handle = s.handle.clone();
             let answer = tokio::task::spawn_blocking(move || handle(&request))
                 .await
@@ -615,6 +678,7 @@ async fn connection(inner: &Arc<Inner>, mut stream: TcpStream) -> Result<(), Ros
             if !persistent {
                 return Ok(());
             }
+            wait = PERSISTENT_IDLE;
         }
     } else {
         refuse(&mut stream, "a connection header names neither a topic nor a service".into()).await
@@ -658,4 +722,30 @@ async fn feed(inner: &Arc<Inner>, p: Arc<Publication>, mut stream: TcpStream, su
         tracing::debug!("ROS 1: {subscriber} left {}: {e}", p.topic);
     }
     p.links.lock().retain(|l| l.id != id);
+}
+
+/// Gives memory that peers' large messages held back to the system a while after the
+/// last of them (the allocator keeps it otherwise: `keep_freed_memory`).
+async fn give_back_memory() {
+    let mut tick = tokio::time::interval(Duration::from_secs(1));
+    let mut due = false;
+    loop {
+        tick.tick().await;
+        let fresh = LARGE_READS.swap(false, Ordering::Relaxed);
+        if due && !fresh {
+            let _ = tokio::task::spawn_blocking(crate::give_back_freed_memory).await;
+        }
+        due = fresh;
+    }
+}
+
+/// Set when a peer's message or call over [`LARGE_READ_BYTES`] was read.
+pub(super) static LARGE_READS: AtomicBool = AtomicBool::new(false);
+pub(super) const LARGE_READ_BYTES: usize = 64 * 1024;
+
+/// Notes a read of `len` bytes from a peer.
+pub(super) fn note_read(len: usize) {
+    if len > LARGE_READ_BYTES {
+        LARGE_READS.store(true, Ordering::Relaxed);
+    }
 }

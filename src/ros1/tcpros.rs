@@ -18,6 +18,10 @@ pub const MAX_HEADER_BYTES: usize = 64 * 1024;
 /// How long a peer has to send its connection header, or to answer ours.
 pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(5);
 
+/// How long the rest of a frame may take once its length came: a peer that stalls a
+/// message half-sent holds its buffer no longer than this.
+pub const BODY_TIMEOUT: Duration = Duration::from_secs(5);
+
 #[derive(Debug, thiserror::Error)]
 pub enum TcprosError {
     #[error("{0}")]
@@ -26,8 +30,8 @@ pub enum TcprosError {
     TooLong { what: &'static str, claimed: u64, limit: usize },
     #[error("the connection header is malformed: {0}")]
     Malformed(String),
-    #[error("no connection header within {} s", HANDSHAKE_TIMEOUT.as_secs())]
-    Timeout,
+    #[error("{what} did not arrive within {} s", after.as_secs_f64())]
+    Timeout { what: &'static str, after: Duration },
     #[error("the peer refused the connection: {0}")]
     Refused(String),
 }
@@ -101,22 +105,39 @@ pub fn fields_of(mut bytes: &[u8]) -> Result<Vec<(&str, &[u8])>, TcprosError> {
 
 /// The peer's connection header, within [`HANDSHAKE_TIMEOUT`].
 pub async fn read_header<S: AsyncRead + Unpin>(stream: &mut S) -> Result<ConnectionHeader, TcprosError> {
-    let bytes = tokio::time::timeout(HANDSHAKE_TIMEOUT, read_frame(stream, "a connection header", MAX_HEADER_BYTES))
-        .await
-        .map_err(|_| TcprosError::Timeout)??;
+    let what = "a connection header";
+    let bytes = within(HANDSHAKE_TIMEOUT, what, read_frame(stream, what, MAX_HEADER_BYTES, None)).await??;
     ConnectionHeader::decode(&bytes)
 }
 
-/// One length-prefixed frame of at most `limit` bytes.
+/// One length-prefixed frame of at most `limit` bytes: its length within `start` (None:
+/// however long it takes), the rest within [`BODY_TIMEOUT`] of it.
 pub async fn read_frame<S: AsyncRead + Unpin>(
     stream: &mut S,
     what: &'static str,
     limit: usize,
+    start: Option<Duration>,
 ) -> Result<Vec<u8>, TcprosError> {
-    let len = stream.read_u32_le().await? as usize;
+    let len = match start {
+        Some(after) => within(after, what, stream.read_u32_le()).await??,
+        None => stream.read_u32_le().await?,
+    } as usize;
     if len > limit {
         return Err(TcprosError::TooLong { what, claimed: len as u64, limit });
     }
+    super::node::note_read(len);
+    within(BODY_TIMEOUT, what, read_body(stream, what, len)).await?
+}
+
+async fn within<T>(after: Duration, what: &'static str, f: impl Future<Output = T>) -> Result<T, TcprosError> {
+    tokio::time::timeout(after, f).await.map_err(|_| TcprosError::Timeout { what, after })
+}
+
+async fn read_body<S: AsyncRead + Unpin>(
+    stream: &mut S,
+    what: &'static str,
+    len: usize,
+) -> Result<Vec<u8>, TcprosError> {
     let mut body = Vec::with_capacity(len.min(64 * 1024));
     let read = (&mut *stream).take(len as u64).read_to_end(&mut body).await?;
     if read < len {
@@ -166,11 +187,24 @@ mod tests {
     #[tokio::test]
     async fn a_frame_over_the_limit_is_refused_unread() {
         let mut bytes: &[u8] = &[0xF0, 0xFF, 0xFF, 0xFF, 1, 2, 3];
-        match read_frame(&mut bytes, "a message", 1024).await {
+        match read_frame(&mut bytes, "a message", 1024, None).await {
             Err(TcprosError::TooLong { claimed, limit: 1024, .. }) => assert_eq!(claimed, 0xFFFF_FFF0),
             other => panic!("{other:?}"),
         }
         let mut short: &[u8] = &[8, 0, 0, 0, 1, 2];
-        assert!(matches!(read_frame(&mut short, "a message", 1024).await, Err(TcprosError::Io(_))));
+        assert!(matches!(read_frame(&mut short, "a message", 1024, None).await, Err(TcprosError::Io(_))));
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_frame_that_stalls_is_given_up() {
+        // Its length, then nothing: the body's deadline ends it.
+        let (mut ours, mut theirs) = tokio::io::duplex(64);
+        theirs.write_all(&100u32.to_le_bytes()).await.unwrap();
+        let read = read_frame(&mut ours, "a message", 1024, None).await;
+        assert!(matches!(read, Err(TcprosError::Timeout { what: "a message", after: BODY_TIMEOUT })), "{read:?}");
+        // Nothing at all, where its start has a deadline too.
+        let read = read_frame(&mut ours, "a request", 1024, Some(Duration::from_secs(2))).await;
+        assert!(matches!(read, Err(TcprosError::Timeout { what: "a request", .. })), "{read:?}");
+        drop(theirs);
     }
 }

@@ -349,7 +349,7 @@ pub async fn call(uri: &str, method: &str, params: &[Value]) -> Result<Value, Xm
             body.len()
         );
         stream.write_all(request.as_bytes()).await?;
-        let (head, body) = read_message(&mut stream, Side::Response).await?;
+        let (head, body, _) = read_message(&mut stream, Side::Response).await?;
         if head != 200 {
             return Err(XmlRpcError::Http(format!("{uri} answered {method} with status {head}")));
         }
@@ -365,8 +365,18 @@ enum Side {
     Response,
 }
 
-/// An HTTP message's status (0 for a request) and body, both bounded.
-async fn read_message(stream: &mut TcpStream, side: Side) -> Result<(u16, Vec<u8>), XmlRpcError> {
+/// Requests larger than this count against [`LARGE_BODIES`], bytes.
+const LARGE_BODY_BYTES: usize = 64 * 1024;
+/// KiB of large request bodies read at once, all peers together: a crowd of megabyte bodies
+/// holds this much, not a megabyte each (the master's calls are a few KiB and never wait).
+static LARGE_BODIES: tokio::sync::Semaphore = tokio::sync::Semaphore::const_new(4 * 1024);
+
+/// An HTTP message's status (0 for a request), its body, both bounded, and a large request's
+/// share of [`LARGE_BODIES`], held while it is answered.
+async fn read_message(
+    stream: &mut TcpStream,
+    side: Side,
+) -> Result<(u16, Vec<u8>, Option<tokio::sync::SemaphorePermit<'static>>), XmlRpcError> {
     let mut buf = Vec::with_capacity(1024);
     let mut chunk = [0u8; 4096];
     let (status, content_length, head_len) = loop {
@@ -402,24 +412,47 @@ async fn read_message(stream: &mut TcpStream, side: Side) -> Result<(u16, Vec<u8
         }
     };
     let mut body = buf.split_off(head_len);
+    let share = match (side, content_length) {
+        (Side::Request, Some(n)) if n > LARGE_BODY_BYTES && n <= MAX_BODY_BYTES => {
+            let kib = n.div_ceil(1024) as u32;
+            let share = LARGE_BODIES.try_acquire_many(kib).map_err(|_| {
+                XmlRpcError::Http(format!("a body of {n} bytes while 4 MiB of large bodies are being read"))
+            })?;
+            // Its share is granted: read it into one buffer of its size, not a doubling one.
+            body.reserve_exact(n.saturating_sub(body.len()));
+            Some(share)
+        }
+        _ => None,
+    };
+    super::node::note_read(content_length.unwrap_or(MAX_BODY_BYTES));
+    read_body(stream, &mut body, content_length, side).await.map(|()| (status, body, share))
+}
+
+/// The rest of a message's body after its head, `body` what of it came with the head.
+async fn read_body(
+    stream: &mut TcpStream,
+    body: &mut Vec<u8>,
+    content_length: Option<usize>,
+    side: Side,
+) -> Result<(), XmlRpcError> {
     match content_length {
         Some(n) if n > MAX_BODY_BYTES => Err(XmlRpcError::Http(format!("a body of {n} bytes, over {MAX_BODY_BYTES}"))),
         Some(n) => {
             if body.len() < n {
-                stream.take((n - body.len()) as u64).read_to_end(&mut body).await?;
+                stream.take((n - body.len()) as u64).read_to_end(body).await?;
             }
             if body.len() < n {
                 return Err(XmlRpcError::Http(format!("the body ends after {} of {n} bytes", body.len())));
             }
             body.truncate(n);
-            Ok((status, body))
+            Ok(())
         }
         // A response without a length runs to the connection's end; a request must say.
         None if side == Side::Response => {
-            stream.take((MAX_BODY_BYTES + 1 - body.len().min(MAX_BODY_BYTES)) as u64).read_to_end(&mut body).await?;
+            stream.take((MAX_BODY_BYTES + 1 - body.len().min(MAX_BODY_BYTES)) as u64).read_to_end(body).await?;
             match body.len() > MAX_BODY_BYTES {
                 true => Err(XmlRpcError::Http(format!("a body over {MAX_BODY_BYTES} bytes"))),
-                false => Ok((status, body)),
+                false => Ok(()),
             }
         }
         None => Err(XmlRpcError::Http("a request without Content-Length".into())),
@@ -443,7 +476,7 @@ pub async fn serve_one(
     mut stream: TcpStream,
     handle: impl FnOnce(&str, &[Value]) -> Result<Value, String>,
 ) -> Result<(), XmlRpcError> {
-    let (_, body) = tokio::time::timeout(TIMEOUT, read_message(&mut stream, Side::Request))
+    let (_, body, _share) = tokio::time::timeout(TIMEOUT, read_message(&mut stream, Side::Request))
         .await
         .map_err(|_| XmlRpcError::Timeout)??;
     let (answer, result) = match parse_call(&body) {
