@@ -11,6 +11,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 pub use crate::ros2::{Distro, Encoding, RosName};
+mod drop_in;
+pub use drop_in::DropInConfig;
 
 /// A configuration problem: which file, which key, why.
 #[derive(Debug, thiserror::Error)]
@@ -582,7 +584,7 @@ pub struct Ros1Config {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub polygon_markers: Option<RosName>,
     /// Their frame and what goes on them (`[ros1.drop_in]`).
-    pub drop_in: crate::interface::drop_in::DropInConfig,
+    pub drop_in: DropInConfig,
     /// Where the D435i's IR images and IMU go, as realsense-ros (ROS 1) names them.
     pub camera_namespace: RosName,
     /// Where the transform from the map frame to VINS's goes (the frames are `[ros2]`'s:

@@ -424,6 +424,28 @@ print(json.dumps(out))
     }
 }
 
+/// The terrain messages' ROS 1 MD5 sums as their upstream packages generate them, pinned: genmsg
+/// (Debian's python3-genmsg, `gentools.compute_md5`) on the .msg files of ANYbotics/grid_map
+/// (grid_map_msgs/msg, master at 73a5b61) and of leggedrobotics/elevation_mapping_cupy
+/// (plane_segmentation/convex_plane_decomposition_msgs/msg, master at 20a8a26), 2026-12-01.
+/// GridMap's is the one upstream's generated code carries. A field polymap's copy gets wrong
+/// changes polymap's sum (and genpy's of the copy), so it fails here, not only on a robot.
+#[test]
+fn the_terrain_messages_md5_sums_are_upstream_s() {
+    for (ty, upstream) in [
+        ("grid_map_msgs/GridMapInfo", "43ee5430e1c253682111cb6bedac0ef9"),
+        ("grid_map_msgs/GridMap", "95681e052b1f73bf87b7eb984382b401"),
+        ("convex_plane_decomposition_msgs/Point2d", "ff8d7d66dd3e4b731ef14a45d38888b6"),
+        ("convex_plane_decomposition_msgs/Polygon2d", "0083ddac30f807eeef29c66ffedb79c7"),
+        ("convex_plane_decomposition_msgs/PolygonWithHoles2d", "62e09666eefc245f9ca3347875cb36cc"),
+        ("convex_plane_decomposition_msgs/BoundingBox2d", "882c57bd03c558cc1c0ff70ad4c5ef0e"),
+        ("convex_plane_decomposition_msgs/PlanarRegion", "8cff8c52c8273f12e2fd17b9d4a3d417"),
+        ("convex_plane_decomposition_msgs/PlanarTerrain", "081e702fce247ef5685dd96b39e3dfd4"),
+    ] {
+        assert_eq!(polymap::ros1::types::md5_of(ty).unwrap(), upstream, "{ty}");
+    }
+}
+
 /// The master's `[code, message, value]` answer to an XML-RPC call, by hand (no polymap code).
 fn master_call(uri: &str, body: &str) -> String {
     let addr = uri.trim_start_matches("http://").trim_end_matches('/');

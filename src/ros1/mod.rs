@@ -20,6 +20,18 @@ pub mod xmlrpc;
 pub use node::{Node, Publisher};
 pub use types::{Ros1Message, Ros1Service};
 
+/// Set when a peer's message or call over [`LARGE_READ_BYTES`] was read: the node gives the
+/// memory back a while after the last of them.
+static LARGE_READS: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+const LARGE_READ_BYTES: usize = 64 * 1024;
+
+/// Notes a read of `len` bytes from a peer.
+fn note_read(len: usize) {
+    if len > LARGE_READ_BYTES {
+        LARGE_READS.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
 /// Where rospy looks for the master when `ROS_MASTER_URI` is not set.
 pub const DEFAULT_MASTER_URI: &str = "http://localhost:11311/";
 

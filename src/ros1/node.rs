@@ -731,21 +731,10 @@ async fn give_back_memory() {
     let mut due = false;
     loop {
         tick.tick().await;
-        let fresh = LARGE_READS.swap(false, Ordering::Relaxed);
+        let fresh = super::LARGE_READS.swap(false, Ordering::Relaxed);
         if due && !fresh {
             let _ = tokio::task::spawn_blocking(crate::give_back_freed_memory).await;
         }
         due = fresh;
-    }
-}
-
-/// Set when a peer's message or call over [`LARGE_READ_BYTES`] was read.
-pub(super) static LARGE_READS: AtomicBool = AtomicBool::new(false);
-pub(super) const LARGE_READ_BYTES: usize = 64 * 1024;
-
-/// Notes a read of `len` bytes from a peer.
-pub(super) fn note_read(len: usize) {
-    if len > LARGE_READ_BYTES {
-        LARGE_READS.store(true, Ordering::Relaxed);
     }
 }

@@ -125,7 +125,7 @@ pub async fn read_frame<S: AsyncRead + Unpin>(
     if len > limit {
         return Err(TcprosError::TooLong { what, claimed: len as u64, limit });
     }
-    super::node::note_read(len);
+    super::note_read(len);
     within(BODY_TIMEOUT, what, read_body(stream, what, len)).await?
 }
 

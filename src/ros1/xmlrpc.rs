@@ -424,7 +424,7 @@ async fn read_message(
         }
         _ => None,
     };
-    super::node::note_read(content_length.unwrap_or(MAX_BODY_BYTES));
+    super::note_read(content_length.unwrap_or(MAX_BODY_BYTES));
     read_body(stream, &mut body, content_length, side).await.map(|()| (status, body, share))
 }
 

@@ -9,8 +9,8 @@ use parking_lot::Mutex;
 
 use super::status::Report;
 use super::worker::FrameEvent;
-use crate::config::{Config, PlanarTerrainConfig};
-use crate::interface::drop_in::{self, DropInConfig};
+use crate::config::{Config, DropInConfig, PlanarTerrainConfig};
+use crate::interface::drop_in;
 use crate::interface::wires::{Out, WireError, Wires};
 use crate::interface::{convert, terrain};
 use crate::map::PolygonMap;
