@@ -215,37 +215,33 @@ fn propagated_poses_carry_the_motion_between_optimised_ones() {
     assert_eq!(dense.counters.propagated, 211);
 }
 
-#[test]
-fn one_wild_pose_poses_no_frame_after_it() {
-    // The odometry at 10 Hz with its 200 Hz propagated stream, then one optimised pose 9 km
-    // away, stamped ahead of the stream (a fake publisher's, or a corrupt one).
+/// The bobbing walk's odometry from 1.0 to 2.0 s at 10 Hz, its propagated poses at 200 Hz
+/// up to `propagated_until_ms`.
+fn walked(propagated_until_ms: u64) -> PoseBuffer {
     let mut buf = PoseBuffer::new(1000, 250 * MS);
     for k in 0..=10u64 {
         buf.push_at(&bobbing(1000 + 100 * k), 0).unwrap();
     }
-    for k in 0..=240u64 {
-        buf.push_propagated_at(&bobbing(1000 + 5 * k), 0).unwrap();
+    for stamp_ms in (1000..=propagated_until_ms).step_by(5) {
+        buf.push_propagated_at(&bobbing(stamp_ms), 0).unwrap();
     }
-    let wild = RawPose { position: [9000.0, 0.0, 1.0], ..bobbing(2100) };
-    buf.push_at(&wild, 0).unwrap();
+    buf
+}
+
+#[test]
+fn one_wild_pose_poses_no_frame_after_it() {
+    // Then one optimised pose 9 km away, stamped ahead of the stream (a fake publisher's, or
+    // a corrupt one).
+    let mut buf = walked(2200);
+    buf.push_at(&RawPose { position: [9000.0, 0.0, 1.0], ..bobbing(2100) }, 0).unwrap();
     for stamp_ms in [2110, 2150, 2190] {
-        assert!(
-            matches!(buf.lookup(stamp_ms * MS), Err(NoPose::Jump { .. })),
-            "{stamp_ms} ms: {:?}",
-            buf.lookup(stamp_ms * MS)
-        );
+        let posed = buf.lookup(stamp_ms * MS);
+        assert!(matches!(posed, Err(NoPose::Jump { .. })), "{stamp_ms} ms: {posed:?}");
     }
     // Between the last plausible pose and the wild one, nothing either.
     assert!(matches!(buf.lookup(2050 * MS), Err(NoPose::Jump { .. })));
     // Without it, the same frames are posed through the propagated stream.
-    let mut plain = PoseBuffer::new(1000, 250 * MS);
-    for k in 0..=10u64 {
-        plain.push_at(&bobbing(1000 + 100 * k), 0).unwrap();
-    }
-    for k in 0..=240u64 {
-        plain.push_propagated_at(&bobbing(1000 + 5 * k), 0).unwrap();
-    }
-    let posed = plain.lookup(2110 * MS).unwrap();
+    let posed = walked(2200).lookup(2110 * MS).unwrap();
     assert!((posed.translation.x - 0.5 * 2.11).abs() < 1e-6, "{}", posed.translation.x);
 }
 
@@ -253,13 +249,7 @@ fn one_wild_pose_poses_no_frame_after_it() {
 fn a_wild_pose_long_after_the_last_poses_nothing_either() {
     // Stamped 0.45 s after the last plausible pose (more than the gap interpolation bridges),
     // the propagated stream running on: still a jump from the pose before it.
-    let mut buf = PoseBuffer::new(1000, 250 * MS);
-    for k in 0..=10u64 {
-        buf.push_at(&bobbing(1000 + 100 * k), 0).unwrap();
-    }
-    for k in 0..=300u64 {
-        buf.push_propagated_at(&bobbing(1000 + 5 * k), 0).unwrap();
-    }
+    let mut buf = walked(2500);
     buf.push_at(&RawPose { position: [9000.0, 0.0, 1.0], ..bobbing(2450) }, 0).unwrap();
     assert!(matches!(buf.lookup(2460 * MS), Err(NoPose::Jump { .. })), "{:?}", buf.lookup(2460 * MS));
 }
