@@ -39,7 +39,8 @@ impl DropInConfig {
     pub fn validate(&self) -> Result<(), Invalid> {
         check_frame_id("ros1.drop_in.frame", &self.frame)?;
         for (axis, v) in ["x", "y", "z"].into_iter().zip(self.map_origin_xyz) {
-            check_range(&format!("ros1.drop_in.map_origin_xyz ({axis})"), v, -1000.0, 1000.0)?;
+            let key = "ros1.drop_in.map_origin_xyz";
+            check_range(key, v, -1000.0, 1000.0).map_err(|(key, why)| (key, format!("{axis}: {why}")))?;
         }
         check_range("ros1.drop_in.map_origin_yaw_deg", self.map_origin_yaw_deg, -360.0, 360.0)?;
         check_range("ros1.drop_in.max_tilt_deg", self.max_tilt_deg, 0.0, 45.0)
