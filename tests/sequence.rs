@@ -247,8 +247,9 @@ fn exact_stamp_parsing() {
 
 #[test]
 fn real_sensor_frames_read() {
-    // The two real frames in ../shared/real use this format: the reader must take real data.
-    let real = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/real");
+    // Two real sensors' frames in this format (tests/data/real/SOURCE.md): the reader must
+    // take real data.
+    let real = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real");
     for name in ["tum-fr3-office", "cape-room"] {
         let s = Sequence::open(real.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
         let f = s.depth(0).unwrap();
