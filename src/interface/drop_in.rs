@@ -72,8 +72,8 @@ fn rectangle(p: &Polygon) -> Option<[[f64; 3]; 4]> {
     let outline: geo::MultiPoint<f64> = p.boundary.iter().map(|v| geo::Point::new(v[0], v[1])).collect();
     let rect = outline.minimum_rotated_rect()?;
     let ring = &rect.exterior().0;
-    let [n, offset] = [p.normal, [p.offset; 3]];
-    let on_plane = |c: &geo::Coord<f64>| [c.x, c.y, -(n[0] * c.x + n[1] * c.y + offset[0]) / n[2]];
+    let (n, offset) = (p.normal, p.offset);
+    let on_plane = |c: &geo::Coord<f64>| [c.x, c.y, -(n[0] * c.x + n[1] * c.y + offset) / n[2]];
     let corners: [[f64; 3]; 4] =
         [on_plane(ring.first()?), on_plane(ring.get(1)?), on_plane(ring.get(2)?), on_plane(ring.get(3)?)];
     let [a, b, c] = [corners[0], corners[1], corners[2]];
