@@ -170,7 +170,20 @@ fn differing_bits(block: &[u8; 64], pattern: &[u8; 64]) -> u64 {
         };
         !(equal_bits(0) | equal_bits(1) << 16 | equal_bits(2) << 32 | equal_bits(3) << 48)
     }
-    #[cfg(not(target_arch = "x86_64"))]
+    #[cfg(target_arch = "aarch64")]
+    {
+        use std::arch::aarch64::{vaddv_u8, vandq_u8, vceqq_u8, vget_high_u8, vget_low_u8, vld1q_u8};
+        // Byte j of each 8 weighs 1 << j: the masked weights of 8 bytes add up to their bits.
+        let weights: [u8; 16] = std::array::from_fn(|j| 1 << (j % 8));
+        // SAFETY: each load reads 16 of the arrays' 64 bytes, or the 16 of `weights`.
+        let equal_bits = |k: usize| unsafe {
+            let load = |bytes: &[u8; 64]| vld1q_u8(bytes.as_ptr().add(16 * k));
+            let bits = vandq_u8(vceqq_u8(load(block), load(pattern)), vld1q_u8(weights.as_ptr()));
+            vaddv_u8(vget_low_u8(bits)) as u64 | (vaddv_u8(vget_high_u8(bits)) as u64) << 8
+        };
+        !(equal_bits(0) | equal_bits(1) << 16 | equal_bits(2) << 32 | equal_bits(3) << 48)
+    }
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
     {
         block.iter().zip(pattern).enumerate().fold(0u64, |bits, (j, (b, p))| bits | u64::from(b != p) << j)
     }

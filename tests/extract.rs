@@ -698,7 +698,7 @@ fn bench_runs_the_cpu_stages_on_the_threads_and_vectors_it_is_given() {
             bench.env("POLYMAP_SIMD", level.name());
         }
         let run = bench.output().unwrap();
-        assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+        assert!(run.status.success(), "{}: {}", run.status, String::from_utf8_lossy(&run.stderr));
         let v: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
         let level = simd.unwrap_or(Level::Avx512).min(Level::detected());
         assert_eq!(v["threads"], threads, "{v}");

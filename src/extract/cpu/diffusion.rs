@@ -134,14 +134,15 @@ fn solve_rows(u: &mut Grid<f32>, band_rows: usize, step: Step) {
 
 /// `dst[c * rows + r] = src[r * cols + c]`, plus `plus[r * cols + c]` if given (`src` and
 /// `plus` are `rows` x `cols`, row-major). In 8 x 8 tiles transposed in registers where the
-/// CPU has AVX2: element by element, the writes went a cache line apart each and the two
+/// CPU has AVX2 or NEON: element by element, the writes went a cache line apart each and the two
 /// transposes of a row pass cost two thirds of its solve. The sum is the one a separate
 /// pass would add, in the same order (the same bits), without that pass.
 fn transpose(src: &[f32], plus: Option<&[f32]>, rows: usize, cols: usize, dst: &mut [f32]) {
     transpose_at(super::simd::level(), src, plus, rows, cols, dst);
 }
 
-/// `transpose` at `level` (at most what the CPU has): 16 x 16 tiles at AVX-512, 8 x 8 at AVX2.
+/// `transpose` at `level` (at most what the CPU has): 16 x 16 tiles at AVX-512, 8 x 8 at AVX2
+/// and NEON.
 fn transpose_at(
     level: super::simd::Level,
     src: &[f32],
@@ -163,10 +164,16 @@ fn transpose_at(
             Level::Avx512 => Some(unsafe { transpose_avx512(src, plus, rows, cols, dst) }),
             // SAFETY: as above, with AVX2.
             Level::Avx2 => Some(unsafe { transpose_avx2(src, plus, rows, cols, dst) }),
-            Level::Baseline => None,
+            Level::Baseline | Level::Neon => None,
         }
     };
-    #[cfg(not(target_arch = "x86_64"))]
+    #[cfg(target_arch = "aarch64")]
+    let tile = match level {
+        // SAFETY: every aarch64 CPU has NEON; the slices are rows * cols long.
+        super::simd::Level::Neon => Some(unsafe { transpose_neon(src, plus, rows, cols, dst) }),
+        _ => None,
+    };
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
     let tile: Option<usize> = {
         let _ = level;
         None
@@ -196,7 +203,8 @@ fn transpose_part(
     }
 }
 
-/// The side of `transpose`'s tiles.
+/// The side of `transpose`'s tiles at AVX2 and NEON.
+#[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
 const TILE: usize = 8;
 
 /// `transpose` on AVX2 of every whole 8 x 8 tile, in registers (pairs interleaved, then
@@ -251,7 +259,52 @@ unsafe fn transpose_avx2(src: &[f32], plus: Option<&[f32]>, rows: usize, cols: u
     TILE
 }
 
+/// `transpose` on NEON of every whole 8 x 8 tile, as four 4 x 4 blocks transposed in
+/// registers (32-bit pairs swapped, then 64-bit halves), so each column of the tile is
+/// written as 32 contiguous bytes; returns the tile's side (`transpose_at` does the rest).
+///
+/// # Safety
+/// The CPU has NEON (every aarch64 CPU does); `src`, `plus` and `dst` hold rows * cols
+/// values.
+#[cfg(target_arch = "aarch64")]
+#[target_feature(enable = "neon")]
+unsafe fn transpose_neon(src: &[f32], plus: Option<&[f32]>, rows: usize, cols: usize, dst: &mut [f32]) -> usize {
+    use std::arch::aarch64::*;
+    for r0 in (0..rows / TILE * TILE).step_by(TILE) {
+        for c0 in (0..cols / TILE * TILE).step_by(TILE) {
+            for (br, bc) in [(0, 0), (0, 4), (4, 0), (4, 4)] {
+                // SAFETY: the block's 4 rows of 4 lie within `src` and `plus` (the last
+                // element read is (r0 + 7) * cols + c0 + 7 < rows * cols) and its 4 columns of
+                // 4 within `dst`; loads and stores are unaligned ones.
+                unsafe {
+                    let at = |k: usize| (r0 + br + k) * cols + c0 + bc;
+                    let r: [float32x4_t; 4] = std::array::from_fn(|k| {
+                        let x = vld1q_f32(src.as_ptr().add(at(k)));
+                        plus.map_or(x, |p| vaddq_f32(x, vld1q_f32(p.as_ptr().add(at(k)))))
+                    });
+                    // t0 = r0[0] r1[0] r0[2] r1[2], t1 = r0[1] r1[1] r0[3] r1[3], t2 and t3
+                    // the same of rows 2 and 3; then the 64-bit halves of t0 and t2 (t1 and
+                    // t3) make columns 0 and 2 (1 and 3).
+                    let (t0, t1) = (vtrn1q_f32(r[0], r[1]), vtrn2q_f32(r[0], r[1]));
+                    let (t2, t3) = (vtrn1q_f32(r[2], r[3]), vtrn2q_f32(r[2], r[3]));
+                    let halves = |a: float32x4_t, b: float32x4_t| {
+                        let (a, b) = (vreinterpretq_f64_f32(a), vreinterpretq_f64_f32(b));
+                        (vreinterpretq_f32_f64(vtrn1q_f64(a, b)), vreinterpretq_f32_f64(vtrn2q_f64(a, b)))
+                    };
+                    let ((c0v, c2v), (c1v, c3v)) = (halves(t0, t2), halves(t1, t3));
+                    let out = dst.as_mut_ptr().add((c0 + bc) * rows + r0 + br);
+                    for (k, column) in [c0v, c1v, c2v, c3v].into_iter().enumerate() {
+                        vst1q_f32(out.add(k * rows), column);
+                    }
+                }
+            }
+        }
+    }
+    TILE
+}
+
 /// The side of `transpose_avx512`'s tiles.
+#[cfg(target_arch = "x86_64")]
 const WIDE_TILE: usize = 16;
 
 /// `transpose` on AVX-512 of every whole 16 x 16 tile, in registers (pairs interleaved,
@@ -649,7 +702,7 @@ mod tests {
         use crate::extract::cpu::simd::Level;
         // Whole tiles of 8 and 16 and partial ones on either side, at every level the CPU has.
         let sizes = [(8, 8), (16, 16), (64, 97), (2, 97), (17, 9), (1, 1), (48, 320), (320, 32), (33, 40)];
-        let levels: Vec<Level> = Level::ALL.into_iter().filter(|&l| l <= Level::detected()).collect();
+        let levels: Vec<Level> = Level::ALL.iter().copied().filter(|&l| l <= Level::detected()).collect();
         for level in levels {
             for (rows, cols) in sizes {
                 let src: Vec<f32> = (0..rows * cols).map(|i| i as f32).collect();

@@ -11,6 +11,8 @@ use std::ops::Range;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use rayon::prelude::*;
 
+use super::simd::Level;
+
 /// At most this many points (evenly strided) score each hypothesis.
 pub const MAX_SCORE_POINTS: usize = 2048;
 
@@ -324,57 +326,51 @@ impl RefitSums {
 }
 
 /// Refit's two passes go over every point of a region (a frame's refits read its points six
-/// to eight times), so on x86-64 they take eight points at a time in AVX-512, or four in
-/// AVX2; elsewhere, and for the last points, the scalar loops below. The same inliers
+/// to eight times), so they take eight points at a time in AVX-512, four in AVX2 or NEON;
+/// at the baseline, and for the last points, the scalar loops below. The same inliers
 /// either way: only the order of the f64 sums differs.
 fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 3]) -> RefitSums {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use super::simd::Level;
-        let (level, full, rest) = split_for_vectors(points);
-        // SAFETY: each pass runs only at a level the CPU has (`simd::level()`).
-        let fast = match level {
-            Level::Avx512 => unsafe { avx512::inlier_moments(full, n, d, dist, o) },
-            Level::Avx2 => unsafe { avx2::inlier_moments(full, n, d, dist, o) },
-            Level::Baseline => RefitSums::default(),
-        };
-        fast.plus(inlier_moments_scalar(rest, n, d, dist, o))
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    inlier_moments_scalar(points, n, d, dist, o)
+    let (level, full, rest) = split_for_vectors(points);
+    // SAFETY: each pass runs only at a level the CPU has (`simd::level()`).
+    let fast = match level {
+        #[cfg(target_arch = "x86_64")]
+        Level::Avx512 => unsafe { avx512::inlier_moments(full, n, d, dist, o) },
+        #[cfg(target_arch = "x86_64")]
+        Level::Avx2 => unsafe { avx2::inlier_moments(full, n, d, dist, o) },
+        #[cfg(target_arch = "aarch64")]
+        Level::Neon => unsafe { neon::inlier_moments(full, n, d, dist, o) },
+        _ => RefitSums::default(),
+    };
+    fast.plus(inlier_moments_scalar(rest, n, d, dist, o))
 }
 
 /// The points within `dist` of (n, offset), and the sum of their squared distances. A point
 /// counts exactly where `PlaneFit::distance` puts it within `dist` of the plane (the same
 /// operations in the same order).
 pub fn support(points: &[[f32; 3]], n: [f64; 3], offset: f64, dist: f64) -> (usize, f64) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use super::simd::Level;
-        let (level, full, rest) = split_for_vectors(points);
-        // SAFETY: each pass runs only at a level the CPU has (`simd::level()`).
-        let (count, squares) = match level {
-            Level::Avx512 => unsafe { avx512::support(full, n, offset, dist) },
-            Level::Avx2 => unsafe { avx2::support(full, n, offset, dist) },
-            Level::Baseline => (0, 0.0),
-        };
-        let (more, more_squares) = support_scalar(rest, n, offset, dist);
-        (count + more, squares + more_squares)
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    support_scalar(points, n, offset, dist)
+    let (level, full, rest) = split_for_vectors(points);
+    // SAFETY: each pass runs only at a level the CPU has (`simd::level()`).
+    let (count, squares) = match level {
+        #[cfg(target_arch = "x86_64")]
+        Level::Avx512 => unsafe { avx512::support(full, n, offset, dist) },
+        #[cfg(target_arch = "x86_64")]
+        Level::Avx2 => unsafe { avx2::support(full, n, offset, dist) },
+        #[cfg(target_arch = "aarch64")]
+        Level::Neon => unsafe { neon::support(full, n, offset, dist) },
+        _ => (0, 0.0),
+    };
+    let (more, more_squares) = support_scalar(rest, n, offset, dist);
+    (count + more, squares + more_squares)
 }
 
 /// The level the refit's passes run at, and `points` split into what its vector pass
-/// takes (whole steps of eight points in AVX-512, four in AVX2, none at the baseline) and
-/// the rest, for the scalar loop.
-#[cfg(target_arch = "x86_64")]
-fn split_for_vectors(points: &[[f32; 3]]) -> (super::simd::Level, &[[f32; 3]], &[[f32; 3]]) {
-    use super::simd::{Level, level};
-    let level = level();
+/// takes (whole steps of eight points in AVX-512, four in AVX2 or NEON, none at the
+/// baseline) and the rest, for the scalar loop.
+fn split_for_vectors(points: &[[f32; 3]]) -> (Level, &[[f32; 3]], &[[f32; 3]]) {
+    let level = super::simd::level();
     let step = match level {
         Level::Avx512 => 8,
-        Level::Avx2 => 4,
+        Level::Avx2 | Level::Neon => 4,
         Level::Baseline => return (level, &[], points),
     };
     let (full, rest) = points.split_at(points.len() / step * step);
@@ -563,6 +559,96 @@ mod avx512 {
             squares = _mm512_mask_add_pd(squares, inlier, squares, _mm512_mul_pd(e, e));
         }
         (count as usize, lane_sum8(squares))
+    }
+}
+
+/// Refit's passes on four points at a time in NEON, as `avx2` does them: one structured
+/// load splits four x y z triples into each coordinate's four values; the f32 distances
+/// are the scalar loops' operations in the same order (no fused multiply-add), and the f64
+/// sums are kept two lanes wide, each lane summing its own points.
+#[cfg(target_arch = "aarch64")]
+mod neon {
+    use std::arch::aarch64::*;
+
+    use super::RefitSums;
+
+    /// The two f64 lanes of `v` added up.
+    #[inline]
+    #[target_feature(enable = "neon")]
+    fn lane_sum(v: float64x2_t) -> f64 {
+        vgetq_lane_f64::<0>(v) + vgetq_lane_f64::<1>(v)
+    }
+
+    /// The four f32 values of `v` as two pairs of f64.
+    #[inline]
+    #[target_feature(enable = "neon")]
+    fn widen(v: float32x4_t) -> [float64x2_t; 2] {
+        [vcvt_f64_f32(vget_low_f32(v)), vcvt_high_f64_f32(v)]
+    }
+
+    /// `inlier_moments` of a multiple of four points.
+    ///
+    /// # Safety
+    /// The CPU has NEON (every aarch64 CPU does).
+    #[target_feature(enable = "neon")]
+    pub(super) unsafe fn inlier_moments(points: &[[f32; 3]], n: [f32; 3], d: f32, dist: f32, o: [f64; 3]) -> RefitSums {
+        let [nx, ny, nz, d, dist, one] = [n[0], n[1], n[2], d, dist, 1.0].map(|v| vdupq_n_f32(v));
+        let [ox, oy, oz] = o.map(|v| vdupq_n_f64(v));
+        let mut acc = [vdupq_n_f64(0.0); 10];
+        for quad in points.chunks_exact(4) {
+            // SAFETY: a chunk of 4 points is 12 floats.
+            let xyz = unsafe { vld3q_f32(quad.as_ptr().cast()) };
+            let (x, y, z) = (xyz.0, xyz.1, xyz.2);
+            let e = vabsq_f32(vaddq_f32(vaddq_f32(vaddq_f32(vmulq_f32(nx, x), vmulq_f32(ny, y)), vmulq_f32(nz, z)), d));
+            // 1 for an inlier, 0 for an outlier: an outlier adds zeros.
+            let w = vreinterpretq_f32_u32(vandq_u32(vcltq_f32(e, dist), vreinterpretq_u32_f32(one)));
+            let (w, x, y, z) = (widen(w), widen(x), widen(y), widen(z));
+            for h in 0..2 {
+                let qx = vmulq_f64(vsubq_f64(x[h], ox), w[h]);
+                let qy = vmulq_f64(vsubq_f64(y[h], oy), w[h]);
+                let qz = vmulq_f64(vsubq_f64(z[h], oz), w[h]);
+                acc[0] = vaddq_f64(acc[0], w[h]);
+                acc[1] = vaddq_f64(acc[1], qx);
+                acc[2] = vaddq_f64(acc[2], qy);
+                acc[3] = vaddq_f64(acc[3], qz);
+                acc[4] = vfmaq_f64(acc[4], qx, qx);
+                acc[5] = vfmaq_f64(acc[5], qx, qy);
+                acc[6] = vfmaq_f64(acc[6], qx, qz);
+                acc[7] = vfmaq_f64(acc[7], qy, qy);
+                acc[8] = vfmaq_f64(acc[8], qy, qz);
+                acc[9] = vfmaq_f64(acc[9], qz, qz);
+            }
+        }
+        let t = acc.map(|v| lane_sum(v));
+        RefitSums { count: t[0], sum: [t[1], t[2], t[3]], products: [t[4], t[5], t[6], t[7], t[8], t[9]] }
+    }
+
+    /// `support` of a multiple of four points.
+    ///
+    /// # Safety
+    /// The CPU has NEON (every aarch64 CPU does).
+    #[target_feature(enable = "neon")]
+    pub(super) unsafe fn support(points: &[[f32; 3]], n: [f64; 3], offset: f64, dist: f64) -> (usize, f64) {
+        let [nx, ny, nz, offset, dist] = [n[0], n[1], n[2], offset, dist].map(|v| vdupq_n_f64(v));
+        let (mut count, mut squares) = (vdupq_n_s64(0), vdupq_n_f64(0.0));
+        for quad in points.chunks_exact(4) {
+            // SAFETY: a chunk of 4 points is 12 floats.
+            let xyz = unsafe { vld3q_f32(quad.as_ptr().cast()) };
+            let (x, y, z) = (widen(xyz.0), widen(xyz.1), widen(xyz.2));
+            for h in 0..2 {
+                let r = vaddq_f64(
+                    vaddq_f64(vaddq_f64(vmulq_f64(nx, x[h]), vmulq_f64(ny, y[h])), vmulq_f64(nz, z[h])),
+                    offset,
+                );
+                let e = vabsq_f64(r);
+                let inlier = vcltq_f64(e, dist);
+                // An inlier's mask is -1 as an integer: subtracting it counts one.
+                count = vsubq_s64(count, vreinterpretq_s64_u64(inlier));
+                let square = vreinterpretq_u64_f64(vmulq_f64(e, e));
+                squares = vaddq_f64(squares, vreinterpretq_f64_u64(vandq_u64(square, inlier)));
+            }
+        }
+        ((vgetq_lane_s64::<0>(count) + vgetq_lane_s64::<1>(count)) as usize, lane_sum(squares))
     }
 }
 

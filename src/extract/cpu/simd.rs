@@ -1,16 +1,20 @@
 //! Which vector instructions the CPU twin's loops use: the widest the CPU has, or
-//! narrower where the environment variable POLYMAP_SIMD (`baseline`, `avx2`, `avx512`)
-//! caps it, to time or test the narrower paths on a wide CPU. Every level computes the
-//! per-pixel stages to the same bits; the refits' and covariances' f64 sums differ in
-//! their order, so in their last digits.
+//! narrower where the environment variable POLYMAP_SIMD (`baseline`, `avx2`, `avx512` on
+//! x86-64; `baseline`, `neon` on aarch64) caps it, to time or test the narrower paths on
+//! a wide CPU. Every level computes the per-pixel stages to the same bits; the refits' and
+//! covariances' f64 sums differ in their order, so in their last digits.
 
 use std::sync::OnceLock;
 
 /// A set of vector instructions, narrowest first.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Level {
-    /// What the target was compiled for (SSE2 on x86-64).
+    /// What the target was compiled for (SSE2 on x86-64, NEON on aarch64), with the
+    /// hand-written vector passes off: their scalar oracles run instead.
     Baseline,
+    /// Advanced SIMD (NEON), on every aarch64 CPU (a Jetson Orin's Cortex-A78AE among
+    /// them): the hand-written passes four f32 or two f64 lanes wide.
+    Neon,
     /// AVX2 with FMA: x86-64 since Haswell and Zen.
     Avx2,
     /// AVX-512 F, BW, VL and DQ: Skylake-X, Ice Lake, Zen 4 and later.
@@ -18,11 +22,18 @@ pub enum Level {
 }
 
 impl Level {
-    pub const ALL: [Level; 3] = [Level::Baseline, Level::Avx2, Level::Avx512];
+    /// The levels this target has, narrowest first.
+    #[cfg(target_arch = "x86_64")]
+    pub const ALL: &[Level] = &[Level::Baseline, Level::Avx2, Level::Avx512];
+    #[cfg(target_arch = "aarch64")]
+    pub const ALL: &[Level] = &[Level::Baseline, Level::Neon];
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+    pub const ALL: &[Level] = &[Level::Baseline];
 
     pub fn name(self) -> &'static str {
         match self {
             Level::Baseline => "baseline",
+            Level::Neon => "neon",
             Level::Avx2 => "avx2",
             Level::Avx512 => "avx512",
         }
@@ -34,21 +45,30 @@ impl Level {
         {
             use std::is_x86_feature_detected as has;
             if has!("avx512f") && has!("avx512bw") && has!("avx512vl") && has!("avx512dq") {
-                return Level::Avx512;
-            }
-            if has!("avx2") && has!("fma") {
-                return Level::Avx2;
+                Level::Avx512
+            } else if has!("avx2") && has!("fma") {
+                Level::Avx2
+            } else {
+                Level::Baseline
             }
         }
-        Level::Baseline
+        // NEON is part of the aarch64 target, as SSE2 is of x86-64's.
+        #[cfg(target_arch = "aarch64")]
+        {
+            Level::Neon
+        }
+        #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+        {
+            Level::Baseline
+        }
     }
 
     /// The level named by POLYMAP_SIMD's value, capped at what the CPU has.
     fn capped(value: &str, detected: Level) -> Result<Level, String> {
-        let wanted = Level::ALL
-            .into_iter()
-            .find(|l| l.name() == value.trim())
-            .ok_or_else(|| format!("POLYMAP_SIMD={value:?} is none of baseline, avx2, avx512"))?;
+        let wanted = Level::ALL.iter().copied().find(|l| l.name() == value.trim()).ok_or_else(|| {
+            let names: Vec<&str> = Level::ALL.iter().map(|l| l.name()).collect();
+            format!("POLYMAP_SIMD={value:?} is none of {}", names.join(", "))
+        })?;
         Ok(wanted.min(detected))
     }
 }
@@ -132,11 +152,11 @@ pub(crate) unsafe fn eight_points(p: *const f32) -> [std::arch::x86_64::__m256; 
 }
 
 /// Defines `$name` to run `$portable` (an `#[inline(always)]` fn) compiled for the
-/// widest level `level()` allows: AVX-512, AVX2, or the baseline target. The loops are
-/// plain Rust either way; only the width of the vectors the compiler may use differs
-/// (16 floats, 8, or 4), which multiplies their throughput without tying the binary to
-/// one CPU. The compiler never fuses a multiply and an add on its own, so every width
-/// computes the same bits.
+/// widest level `level()` allows: AVX-512, AVX2, or the baseline target (on aarch64 that
+/// has NEON, the only level there). The loops are plain Rust either way; only the width of
+/// the vectors the compiler may use differs (16 floats, 8, or 4), which multiplies their
+/// throughput without tying the binary to one CPU. The compiler never fuses a multiply and
+/// an add on its own, so every width computes the same bits.
 macro_rules! widest_simd {
     ($(#[$meta:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? = $portable:ident) => {
         $(#[$meta])*
@@ -156,7 +176,7 @@ macro_rules! widest_simd {
                     $crate::extract::cpu::simd::Level::Avx512 => return unsafe { avx512($($arg),*) },
                     // SAFETY: as above.
                     $crate::extract::cpu::simd::Level::Avx2 => return unsafe { avx2($($arg),*) },
-                    $crate::extract::cpu::simd::Level::Baseline => {}
+                    $crate::extract::cpu::simd::Level::Baseline | $crate::extract::cpu::simd::Level::Neon => {}
                 }
             }
             $portable($($arg),*)
@@ -171,12 +191,21 @@ mod tests {
 
     #[test]
     fn polymap_simd_caps_the_level_and_names_a_bad_value() {
-        assert_eq!(Level::capped("avx2", Level::Avx512), Ok(Level::Avx2));
-        assert_eq!(Level::capped(" baseline\n", Level::Avx512), Ok(Level::Baseline));
-        // Never above what the CPU has.
-        assert_eq!(Level::capped("avx512", Level::Avx2), Ok(Level::Avx2));
-        let e = Level::capped("sse4", Level::Avx2).unwrap_err();
-        assert!(e.contains("POLYMAP_SIMD=\"sse4\""), "{e}");
+        let widest = *Level::ALL.last().expect("a level");
+        for &l in Level::ALL {
+            assert_eq!(Level::capped(l.name(), widest), Ok(l));
+            // Never above what the CPU has.
+            assert_eq!(Level::capped(l.name(), Level::Baseline), Ok(Level::Baseline));
+        }
+        assert_eq!(Level::capped(" baseline\n", widest), Ok(Level::Baseline));
+        let e = Level::capped("sse4", widest).unwrap_err();
+        assert!(e.contains("POLYMAP_SIMD=\"sse4\"") && e.contains("baseline"), "{e}");
+        // A level of another target is no level here.
+        #[cfg(target_arch = "x86_64")]
+        assert!(Level::capped("neon", widest).is_err());
+        #[cfg(target_arch = "aarch64")]
+        assert!(Level::capped("avx2", widest).is_err());
         assert!(level() <= Level::detected());
+        assert!(Level::ALL.contains(&Level::detected()));
     }
 }

@@ -16,6 +16,13 @@ use nalgebra::{Matrix2, Matrix3, SymmetricEigen, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::cpu::ransac::PlaneFit;
+use super::cpu::simd::{Level, level};
+#[cfg(target_arch = "aarch64")]
+use simd::neon;
+#[cfg(target_arch = "x86_64")]
+use simd::{avx2, avx512};
+
+mod simd;
 
 /// The covariance of a fitted plane: its normal tilts by (a1, a2) rad towards `axes[0]`
 /// and `axes[1]`, and it shifts by `shift` m along the normal at `centre`; `cov` is the
@@ -345,25 +352,27 @@ struct InlierSums {
 }
 
 impl FitFrame {
-    /// The sums over the points: on x86-64 eight at a time in AVX-512 or four in AVX2, the
-    /// last ones (and all, elsewhere) by `inlier_sums_scalar`, the vector passes' oracle.
+    /// The sums over the points: eight at a time in AVX-512, four in AVX2 or NEON, the last
+    /// ones (and all, at the baseline) by `inlier_sums_scalar`, the vector passes' oracle.
     fn inlier_sums(&self, points: &[[f32; 3]]) -> InlierSums {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use super::cpu::simd::{Level, level};
-            let step = match level() {
-                Level::Avx512 => 8,
-                Level::Avx2 => 4,
-                Level::Baseline => return self.inlier_sums_scalar(points),
-            };
-            let (full, rest) = points.split_at(points.len() / step * step);
-            // SAFETY: each pass runs only at a level the CPU has (`level()`).
-            let fast =
-                unsafe { if step == 8 { avx512::inlier_sums(self, full) } else { avx2::inlier_sums(self, full) } };
-            fast.plus(&self.inlier_sums_scalar(rest))
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        self.inlier_sums_scalar(points)
+        let level = level();
+        let step = match level {
+            Level::Avx512 => 8,
+            Level::Avx2 | Level::Neon => 4,
+            Level::Baseline => return self.inlier_sums_scalar(points),
+        };
+        let (full, rest) = points.split_at(points.len() / step * step);
+        // SAFETY: each pass runs only at a level the CPU has (`level()`).
+        let fast = match level {
+            #[cfg(target_arch = "x86_64")]
+            Level::Avx512 => unsafe { avx512::inlier_sums(self, full) },
+            #[cfg(target_arch = "x86_64")]
+            Level::Avx2 => unsafe { avx2::inlier_sums(self, full) },
+            #[cfg(target_arch = "aarch64")]
+            Level::Neon => unsafe { neon::inlier_sums(self, full) },
+            _ => InlierSums::default(),
+        };
+        fast.plus(&self.inlier_sums_scalar(rest))
     }
 
     fn inlier_sums_scalar(&self, points: &[[f32; 3]]) -> InlierSums {
@@ -399,217 +408,6 @@ impl InlierSums {
             scale: self.scale + o.scale,
             plain: std::array::from_fn(|k| self.plain[k] + o.plain[k]),
             weighted: std::array::from_fn(|k| self.weighted[k] + o.weighted[k]),
-        }
-    }
-}
-
-/// `FitFrame::inlier_sums` on four points at a time, each lane summing its own points.
-/// The inlier test is the scalar loop's operations in the same order (no fused
-/// multiply-add), so a point is an inlier on both or on neither, and the weight is its f32
-/// operations, so the same weight; only the order of the f64 sums differs.
-#[cfg(target_arch = "x86_64")]
-mod avx2 {
-    use std::arch::x86_64::*;
-
-    use super::{FitFrame, InlierSums};
-    use crate::extract::cpu::simd::{four_points, lane_sum};
-
-    /// The sums over a multiple of four points.
-    ///
-    /// # Safety
-    /// The CPU has AVX2 and FMA.
-    #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn inlier_sums(f: &FitFrame, points: &[[f32; 3]]) -> InlierSums {
-        let splat = |v: [f64; 3]| v.map(|c| _mm256_set1_pd(c));
-        let ([nx, ny, nz], [fx, fy, fz], [ax, ay, az], [bx, by, bz]) =
-            (splat(f.n), splat(f.foot), splat(f.axes[0]), splat(f.axes[1]));
-        let (offset, dist, one) = (_mm256_set1_pd(f.offset), _mm256_set1_pd(f.dist), _mm256_set1_pd(1.0));
-        let abs = _mm256_castsi256_pd(_mm256_set1_epi64x(i64::MAX));
-        let abs32 = _mm_castsi128_ps(_mm_set1_epi32(i32::MAX));
-        let (half, floor, one32) = (_mm_set1_ps(0.5), _mm_set1_ps(0.05), _mm_set1_ps(1.0));
-        let dot = |x, y, z, a, b, c| {
-            _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(x, a), _mm256_mul_pd(y, b)), _mm256_mul_pd(z, c))
-        };
-        let zero = _mm256_setzero_pd();
-        let (mut count, mut scale, mut sum, mut plain, mut weighted) = (zero, zero, [zero; 3], [zero; 6], [zero; 6]);
-        for quad in points.chunks_exact(4) {
-            // SAFETY: a chunk of 4 points is 12 floats.
-            let p = unsafe { four_points(quad.as_ptr().cast()) };
-            let [x, y, z] = p.map(|c| _mm256_cvtps_pd(c));
-            let np = dot(x, y, z, nx, ny, nz);
-            let r = _mm256_add_pd(np, offset);
-            // All ones for an inlier: everything it adds is masked with it.
-            let inlier = _mm256_cmp_pd::<_CMP_LT_OQ>(_mm256_and_pd(r, abs), dist);
-            let (dx, dy, dz) = (_mm256_sub_pd(x, fx), _mm256_sub_pd(y, fy), _mm256_sub_pd(z, fz));
-            let (u, v) = (dot(dx, dy, dz, ax, ay, az), dot(dx, dy, dz, bx, by, bz));
-            // relative_variance, in f32.
-            let squares =
-                _mm_add_ps(_mm_add_ps(_mm_mul_ps(p[0], p[0]), _mm_mul_ps(p[1], p[1])), _mm_mul_ps(p[2], p[2]));
-            let range = _mm_sqrt_ps(squares);
-            let cos = _mm_max_ps(_mm_div_ps(_mm_and_ps(_mm256_cvtpd_ps(np), abs32), range), floor);
-            let spread = _mm_add_ps(half, _mm_mul_ps(half, range));
-            let g2 = _mm_mul_ps(_mm_mul_ps(spread, spread), cos);
-            let (inverse, g2) = (_mm256_cvtps_pd(_mm_div_ps(one32, g2)), _mm256_cvtps_pd(g2));
-            let keep = |v| _mm256_and_pd(v, inlier);
-            count = _mm256_add_pd(count, keep(one));
-            scale = _mm256_add_pd(scale, keep(_mm256_mul_pd(_mm256_mul_pd(r, r), inverse)));
-            for (s, c) in sum.iter_mut().zip([x, y, z]) {
-                *s = _mm256_add_pd(*s, keep(c));
-            }
-            let terms = [_mm256_mul_pd(u, u), _mm256_mul_pd(u, v), _mm256_mul_pd(v, v), u, v, one].map(keep);
-            for t in 0..6 {
-                plain[t] = _mm256_add_pd(plain[t], terms[t]);
-                weighted[t] = _mm256_fmadd_pd(terms[t], g2, weighted[t]);
-            }
-        }
-        let total = |v| lane_sum(v);
-        InlierSums {
-            count: total(count),
-            sum: sum.map(total),
-            scale: total(scale),
-            plain: plain.map(total),
-            weighted: weighted.map(total),
-        }
-    }
-}
-
-/// `avx2`'s pass on eight points at a time: the same operations, eight lanes wide, the
-/// inliers a mask register.
-#[cfg(target_arch = "x86_64")]
-mod avx512 {
-    use std::arch::x86_64::*;
-
-    use super::{FitFrame, HalvesCut, InlierSums, PlaneFit};
-    use crate::extract::cpu::simd::{eight_points, lane_sum8};
-
-    /// The sums over a multiple of eight points.
-    ///
-    /// # Safety
-    /// The CPU has AVX-512 F and VL.
-    #[target_feature(enable = "avx512f,avx512vl")]
-    pub(super) unsafe fn inlier_sums(f: &FitFrame, points: &[[f32; 3]]) -> InlierSums {
-        let splat = |v: [f64; 3]| v.map(|c| _mm512_set1_pd(c));
-        let ([nx, ny, nz], [fx, fy, fz], [ax, ay, az], [bx, by, bz]) =
-            (splat(f.n), splat(f.foot), splat(f.axes[0]), splat(f.axes[1]));
-        let (offset, dist, one) = (_mm512_set1_pd(f.offset), _mm512_set1_pd(f.dist), _mm512_set1_pd(1.0));
-        let abs32 = _mm256_castsi256_ps(_mm256_set1_epi32(i32::MAX));
-        let (half, floor, one32) = (_mm256_set1_ps(0.5), _mm256_set1_ps(0.05), _mm256_set1_ps(1.0));
-        let dot = |x, y, z, a, b, c| {
-            _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(x, a), _mm512_mul_pd(y, b)), _mm512_mul_pd(z, c))
-        };
-        let zero = _mm512_setzero_pd();
-        let (mut count, mut scale, mut sum, mut plain, mut weighted) = (zero, zero, [zero; 3], [zero; 6], [zero; 6]);
-        for eight in points.chunks_exact(8) {
-            // SAFETY: a chunk of 8 points is 24 floats.
-            let p = unsafe { eight_points(eight.as_ptr().cast()) };
-            let [x, y, z] = p.map(|c| _mm512_cvtps_pd(c));
-            let np = dot(x, y, z, nx, ny, nz);
-            let r = _mm512_add_pd(np, offset);
-            let inlier = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(_mm512_abs_pd(r), dist);
-            let (dx, dy, dz) = (_mm512_sub_pd(x, fx), _mm512_sub_pd(y, fy), _mm512_sub_pd(z, fz));
-            let (u, v) = (dot(dx, dy, dz, ax, ay, az), dot(dx, dy, dz, bx, by, bz));
-            // relative_variance, in f32.
-            let squares = _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(p[0], p[0]), _mm256_mul_ps(p[1], p[1])),
-                _mm256_mul_ps(p[2], p[2]),
-            );
-            let range = _mm256_sqrt_ps(squares);
-            let cos = _mm256_max_ps(_mm256_div_ps(_mm256_and_ps(_mm512_cvtpd_ps(np), abs32), range), floor);
-            let spread = _mm256_add_ps(half, _mm256_mul_ps(half, range));
-            let g2 = _mm256_mul_ps(_mm256_mul_ps(spread, spread), cos);
-            let (inverse, g2) = (_mm512_cvtps_pd(_mm256_div_ps(one32, g2)), _mm512_cvtps_pd(g2));
-            let add = |s, v| _mm512_mask_add_pd(s, inlier, s, v);
-            count = add(count, one);
-            scale = add(scale, _mm512_mul_pd(_mm512_mul_pd(r, r), inverse));
-            for (s, c) in sum.iter_mut().zip([x, y, z]) {
-                *s = add(*s, c);
-            }
-            let terms = [_mm512_mul_pd(u, u), _mm512_mul_pd(u, v), _mm512_mul_pd(v, v), u, v, one];
-            for t in 0..6 {
-                plain[t] = add(plain[t], terms[t]);
-                weighted[t] = _mm512_mask3_fmadd_pd(terms[t], g2, weighted[t], inlier);
-            }
-        }
-        let total = |v| lane_sum8(v);
-        InlierSums {
-            count: total(count),
-            sum: sum.map(total),
-            scale: total(scale),
-            plain: plain.map(total),
-            weighted: weighted.map(total),
-        }
-    }
-
-    /// Each point's three floats' bits in a mask of 8 points: bit 3i, 3i + 1 and 3i + 2 for
-    /// point i.
-    const TRIPLED: [u32; 256] = {
-        let mut t = [0u32; 256];
-        let mut m = 0;
-        while m < 256 {
-            let mut i = 0;
-            while i < 8 {
-                if m & (1 << i) != 0 {
-                    t[m] |= 7 << (3 * i);
-                }
-                i += 1;
-            }
-            m += 1;
-        }
-        t
-    };
-
-    /// `split_halves` of a multiple of eight points, appended to `halves`: the inlier and
-    /// side tests are `split_halves_scalar`'s operations in the same order (no fused
-    /// multiply-add); each half's points are packed to the front of the 24 floats (one
-    /// compress of the first 16, one of the last 8) and stored whole, so a store writes up
-    /// to 16 floats past the last point kept.
-    ///
-    /// # Safety
-    /// The CPU has AVX-512 F and VL; each half has room for 6 points more than it holds
-    /// plus all of `points`.
-    #[target_feature(enable = "avx512f,avx512vl")]
-    pub(super) unsafe fn split_halves(
-        points: &[[f32; 3]],
-        fit: &PlaneFit,
-        dist: f64,
-        cut: &HalvesCut,
-        halves: &mut [Vec<[f32; 3]>; 2],
-    ) {
-        let splat = |v: [f64; 3]| v.map(|c| _mm512_set1_pd(c));
-        let ([nx, ny, nz], [cx, cy, cz], [ax, ay, az]) =
-            (splat(fit.normal.into()), splat(cut.centre.into()), splat(cut.across.into()));
-        let (offset, dist, zero) = (_mm512_set1_pd(fit.offset), _mm512_set1_pd(dist), _mm512_setzero_pd());
-        let dot = |x, y, z, a, b, c| {
-            _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(x, a), _mm512_mul_pd(y, b)), _mm512_mul_pd(z, c))
-        };
-        let mut kept = [halves[0].len(), halves[1].len()];
-        for eight in points.chunks_exact(8) {
-            let from = eight.as_ptr().cast::<f32>();
-            // SAFETY: a chunk of 8 points is 24 floats.
-            let [x, y, z] = unsafe { eight_points(from) }.map(|c| _mm512_cvtps_pd(c));
-            let r = _mm512_add_pd(dot(x, y, z, nx, ny, nz), offset);
-            let inlier = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(_mm512_abs_pd(r), dist);
-            let side = dot(_mm512_sub_pd(x, cx), _mm512_sub_pd(y, cy), _mm512_sub_pd(z, cz), ax, ay, az);
-            let upper = _mm512_cmp_pd_mask::<_CMP_GE_OQ>(side, zero);
-            // SAFETY: as for `eight_points`.
-            let (a, b) = unsafe { (_mm512_loadu_ps(from), _mm256_loadu_ps(from.add(16))) };
-            for (half, mask) in [inlier & !upper, inlier & upper].into_iter().enumerate() {
-                let floats = TRIPLED[mask as usize];
-                let low = (floats as u16).count_ones() as usize;
-                // SAFETY: the half holds kept[half] points and has room for 6 more than all
-                // the points it can still take; each store writes 16 or 8 floats, from
-                // within the first 3 * (kept + 8) floats of that room.
-                unsafe {
-                    let to = halves[half].as_mut_ptr().add(kept[half]).cast::<f32>();
-                    _mm512_storeu_ps(to, _mm512_maskz_compress_ps(floats as u16, a));
-                    _mm256_storeu_ps(to.add(low), _mm256_maskz_compress_ps((floats >> 16) as u8, b));
-                }
-                kept[half] += mask.count_ones() as usize;
-            }
-        }
-        for (half, kept) in halves.iter_mut().zip(kept) {
-            // SAFETY: the first `kept` points are written (packed, in order, above).
-            unsafe { half.set_len(kept) };
         }
     }
 }
@@ -676,15 +474,18 @@ pub fn halves_agreement(
 fn split_halves(points: &[[f32; 3]], fit: &PlaneFit, dist: f64, cut: &HalvesCut) -> [Vec<[f32; 3]>; 2] {
     // Room for the vector pass's whole-register stores past the last point (16 floats).
     let mut halves = [Vec::with_capacity(points.len() + 6), Vec::with_capacity(points.len() + 6)];
-    let mut rest = points;
     #[cfg(target_arch = "x86_64")]
-    if super::cpu::simd::level() == super::cpu::simd::Level::Avx512 {
-        let full;
-        (full, rest) = points.split_at(points.len() / 8 * 8);
+    let rest = if level() == Level::Avx512 {
+        let (full, rest) = points.split_at(points.len() / 8 * 8);
         // SAFETY: the CPU has AVX-512 (checked just above); both halves are empty with
         // room for every point and 6 more.
         unsafe { avx512::split_halves(full, fit, dist, cut, &mut halves) };
-    }
+        rest
+    } else {
+        points
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let rest = points;
     split_halves_scalar(rest, fit, dist, cut, &mut halves);
     halves
 }
