@@ -42,6 +42,9 @@ export POLYMAP_PYTHON="$PWD/$venv/bin/python"
 # librealsense2 for --features realsense: sets PKG_CONFIG_PATH and LD_LIBRARY_PATH.
 source scripts/librealsense.sh "$venv"
 
+# The Quick start's build, default features (no `realsense`), as `cargo run --release --
+# demo` makes it; in debug, which reuses the suite's dependencies.
+cargo build --locked --bin polymap
 # The examples as programs: tests/readme_clients.rs runs the Rust planner client as the
 # README does (`cargo test --all-targets` builds examples only as test harnesses).
 cargo build --locked --examples --features realsense

@@ -198,7 +198,7 @@ fn snapshot_with(boundary: Vec<[f64; 3]>) -> MapSnapshot {
 }
 
 #[test]
-fn a_degenerate_polygon_in_a_snapshot_is_refused_as_corrupt_within_a_second() {
+fn a_degenerate_polygon_in_a_snapshot_is_refused_as_corrupt_and_loading_ends() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("map.json");
     let mut config = Config::default();
@@ -208,9 +208,7 @@ fn a_degenerate_polygon_in_a_snapshot_is_refused_as_corrupt_within_a_second() {
     // frame's origin near 1e16 m, and the clearing samples' loop never ended).
     let bowtie = vec![[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
     std::fs::write(&path, serde_json::to_vec(&snapshot_with(bowtie)).unwrap()).unwrap();
-    let started = Instant::now();
-    let map = polymap::map::persist::initial_map(&config.map);
-    assert!(started.elapsed() < Duration::from_secs(1), "took {:?}", started.elapsed());
+    let map = load_or_hang(&config.map);
     assert!(map.is_empty(), "the corrupt map is not loaded");
     let aside: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert!(aside.iter().any(|n| n.to_string_lossy().starts_with("map.json.corrupt-")), "moved aside: {aside:?}");
@@ -218,10 +216,17 @@ fn a_degenerate_polygon_in_a_snapshot_is_refused_as_corrupt_within_a_second() {
     // it loads, and quickly.
     let sliver = vec![[0.0, 0.0, 0.0], [2e5, 0.0, 0.0], [2e5, 1e-5, 0.0], [0.0, 1e-5, 0.0]];
     std::fs::write(&path, serde_json::to_vec(&snapshot_with(sliver)).unwrap()).unwrap();
-    let started = Instant::now();
-    let map = polymap::map::persist::initial_map(&config.map);
-    assert!(started.elapsed() < Duration::from_secs(1), "took {:?}", started.elapsed());
+    let map = load_or_hang(&config.map);
     assert_eq!(map.len(), 1);
+}
+
+/// `initial_map` of `config`, failing the test if it never returns (a minute is a hang:
+/// a load takes milliseconds).
+fn load_or_hang(config: &polymap::config::MapConfig) -> polymap::map::PolygonMap {
+    let (tx, rx) = std::sync::mpsc::channel();
+    let config = config.clone();
+    std::thread::spawn(move || tx.send(polymap::map::persist::initial_map(&config)));
+    rx.recv_timeout(Duration::from_secs(60)).expect("loading the snapshot never ended")
 }
 
 #[test]
@@ -237,7 +242,7 @@ fn a_gpu_backend_without_a_gpu_stops_start_up_with_the_reason() {
     let started = Instant::now();
     // No Vulkan driver to be found: the loader looks only where there is none.
     let out = Command::new(bin())
-        .args(["run", "--duration", "30", "--config"])
+        .args(["run", "--duration", "600", "--config"])
         .arg(&config)
         .env("VK_ICD_FILENAMES", "/nonexistent/polymap-no-icd.json")
         .env("VK_DRIVER_FILES", "/nonexistent/polymap-no-icd.json")
@@ -245,7 +250,8 @@ fn a_gpu_backend_without_a_gpu_stops_start_up_with_the_reason() {
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");
-    assert!(started.elapsed() < Duration::from_secs(20), "it stopped at start-up, not at the end");
+    // Far short of the 600 s it would have run: it stopped at start-up.
+    assert!(started.elapsed() < Duration::from_secs(300), "it stopped at the end, not at start-up");
     assert!(stderr.contains("the extractor could not start") && stderr.contains("no Vulkan adapter"), "{stderr}");
 }
 
