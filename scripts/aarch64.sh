@@ -14,15 +14,7 @@ mkdir -p "$out"
 start=$(date +%s)
 step() { echo "== $* ($(($(date +%s) - start)) s)"; }
 
-need_debs() {
-    local missing=()
-    for p in "$@"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
-    [ ${#missing[@]} -eq 0 ] && return
-    echo "installing ${missing[*]}"
-    local sudo=""; [ "$(id -u)" -ne 0 ] && sudo="sudo"
-    $sudo apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
-}
+source scripts/need_debs.sh
 need_debs gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user python3
 target=aarch64-unknown-linux-gnu
 rustup target list --installed | grep -qx "$target" || rustup target add "$target"

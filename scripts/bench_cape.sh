@@ -18,13 +18,8 @@ seqs=("$@")
 src="$cape/CAPE"
 [ -f "$src/CAPE.cpp" ] || { echo "$cape: no CAPE/CAPE.cpp (a clone of pedropro/CAPE?)" >&2; exit 2; }
 
-missing=()
-for p in g++ libopencv-dev libeigen3-dev pkg-config; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
-if [ ${#missing[@]} -gt 0 ]; then
-    sudo=""; [ "$(id -u)" -ne 0 ] && sudo="sudo"
-    $sudo apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
-fi
+source scripts/need_debs.sh
+need_debs g++ libopencv-dev libeigen3-dev pkg-config
 
 mkdir -p target
 if [ ! target/cape_bench -nt bench/cape/cape_bench.cpp ]; then

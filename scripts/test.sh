@@ -9,15 +9,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-need_debs() {
-    local missing=()
-    for p in "$@"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
-    [ ${#missing[@]} -eq 0 ] && return
-    echo "installing ${missing[*]}"
-    local sudo=""; [ "$(id -u)" -ne 0 ] && sudo="sudo"
-    $sudo apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
-}
+source scripts/need_debs.sh
 need_debs mesa-vulkan-drivers libvulkan1 python3-venv pkg-config patchelf binutils libusb-1.0-0 libudev1
 # A real ROS 1 for tests/ros1.rs: Debian's ros_comm (Noetic's 1.15), rosbag (its record and
 # play are roscpp programs), genmsg/genpy, catkin (which builds polymap_msgs as on a robot)
