@@ -134,8 +134,8 @@ fn solve_rows(u: &mut Grid<f32>, band_rows: usize, step: Step) {
 
 /// `dst[c * rows + r] = src[r * cols + c]`, plus `plus[r * cols + c]` if given (`src` and
 /// `plus` are `rows` x `cols`, row-major). In 8 x 8 tiles transposed in registers where the
-/// CPU has AVX2 or NEON: element by element, the writes went a cache line apart each and the two
-/// transposes of a row pass cost two thirds of its solve. The sum is the one a separate
+/// CPU has AVX2 or NEON: element by element, the writes went a cache line apart each and
+/// the two transposes of a row pass cost two thirds of its solve. The sum is the one a separate
 /// pass would add, in the same order (the same bits), without that pass.
 fn transpose(src: &[f32], plus: Option<&[f32]>, rows: usize, cols: usize, dst: &mut [f32]) {
     transpose_at(super::simd::level(), src, plus, rows, cols, dst);
