@@ -15,7 +15,7 @@ use polymap::extract::{Grid, Polygon, VertexKind};
 use polymap::map::PolygonMap;
 use polymap::stats::spread;
 use polymap::synth::path::camera_pose;
-use polymap::types::Intrinsics;
+use polymap::types::{Intrinsics, Pose};
 
 /// Tiles 0..300: a 20 x 15 grid of 0.2 m tiles, 0.1 m apart, at heights cycling through 7
 /// steps, in front of the camera. The others: the same, 200 a row, from 20 m further on.
@@ -58,7 +58,7 @@ fn run(size: usize, frames: usize) {
     let inv = pose.inverse();
     let mut map = PolygonMap::new(&MapConfig::default());
     let all: Vec<Polygon> = (0..size).map(|i| seen(i, &inv)).collect();
-    map.update(&all, &pose, &intr, None);
+    map.update(&all, &Pose { stamp_ns: 0, transform: pose }, &intr, None);
     assert_eq!(map.len(), size, "the tiles stay apart");
     // Every sample of every polygon in view is projected and looked up; the depth is 1 m
     // nearer than anything (it hides the tiles, which says nothing of them) so that nothing
@@ -68,7 +68,8 @@ fn run(size: usize, frames: usize) {
     for k in 0..frames {
         let polys: Vec<Polygon> = (0..12).map(|j| seen((k * 7 + j * 25) % 300, &inv)).collect();
         let t = Instant::now();
-        let update = map.update(&polys, &pose, &intr, Some(&depth));
+        let update =
+            map.update(&polys, &Pose { stamp_ns: k as u64 * 33_333_333, transform: pose }, &intr, Some(&depth));
         update_ms.push(t.elapsed().as_secs_f64() * 1e3);
         let t = Instant::now();
         for id in update.changed.iter().chain(&update.added) {

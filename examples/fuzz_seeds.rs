@@ -79,7 +79,7 @@ fn main() -> anyhow::Result<()> {
     for k in [0, 10, 20] {
         let extraction = extractor.extract(&seq.depth(k)?, &seq.intrinsics)?;
         let polygons = &extraction.polygons.polygons;
-        map.update(polygons, &seq.poses[k].transform, &seq.intrinsics, Some(&extraction.depth));
+        map.update(polygons, &seq.poses[k], &seq.intrinsics, Some(&extraction.depth));
     }
     let mut snapshot = map.snapshot();
     snapshot.polygons.truncate(3);

@@ -58,7 +58,7 @@ fn main() -> Result<()> {
         }
         let mut map = PolygonMap::new(&config.map);
         for &k in &order {
-            map.update(&frames[k].0, &seq.poses[k].transform, &seq.intrinsics, Some(&frames[k].1));
+            map.update(&frames[k].0, &seq.poses[k], &seq.intrinsics, Some(&frames[k].1));
         }
         let mut seen = order.clone();
         seen.sort_unstable();

@@ -12,7 +12,9 @@ use serde::{Deserialize, Serialize};
 
 pub use crate::ros2::{Distro, Encoding, RosName};
 mod drop_in;
+mod map;
 pub use drop_in::DropInConfig;
+pub use map::MapConfig;
 
 /// A configuration problem: which file, which key, why.
 #[derive(Debug, thiserror::Error)]
@@ -400,63 +402,6 @@ impl Default for PipelineConfig {
     }
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct MapConfig {
-    /// Largest height difference over the overlap for two polygons to merge (the drift tolerance), m.
-    pub merge_height_tolerance_m: f64,
-    /// Largest angle between normals for two polygons to merge, degrees.
-    pub merge_normal_tolerance_deg: f64,
-    /// Smallest overlap, as a fraction of the smaller footprint, for two polygons to match.
-    pub merge_min_overlap: f64,
-    /// Apply the vertical drift Kalman filter.
-    pub drift_filter: bool,
-    /// Process noise added to the drift variance each frame, m^2.
-    pub drift_sigma_p: f64,
-    /// Variance of one drift measurement, m^2.
-    pub drift_sigma_m: f64,
-    /// Planes within this angle of horizontal are horizontal (tread, floor, landing), degrees.
-    pub horizontal_max_tilt_deg: f64,
-    /// Planes tilted at least this much are vertical (riser, wall); in between is slope, degrees.
-    pub vertical_min_tilt_deg: f64,
-    /// Most vertices a map polygon's outline and holes keep together after a merge.
-    pub max_vertices: usize,
-    /// How far the inset outline (safe footholds) lies inside the polygon, m.
-    pub foot_margin_m: f64,
-    /// Frames in a row that must contradict a map polygon before it is removed.
-    pub clear_after_frames: u32,
-    /// Depth disagreement that counts as seeing through or something else in place, m.
-    pub clear_tolerance_m: f64,
-    /// Where the map is saved (atomically); empty = never saved.
-    pub snapshot_path: PathBuf,
-    /// Seconds between snapshots while running (one more is written at shutdown).
-    pub snapshot_period_s: f64,
-    /// Load `snapshot_path` at start when it exists.
-    pub load_at_start: bool,
-}
-
-impl Default for MapConfig {
-    fn default() -> Self {
-        MapConfig {
-            merge_height_tolerance_m: 0.05,
-            merge_normal_tolerance_deg: 10.0,
-            merge_min_overlap: 0.1,
-            drift_filter: true,
-            drift_sigma_p: 4e-6,
-            drift_sigma_m: 1e-6,
-            horizontal_max_tilt_deg: 25.0,
-            vertical_min_tilt_deg: 65.0,
-            max_vertices: 64,
-            foot_margin_m: 0.05,
-            clear_after_frames: 3,
-            clear_tolerance_m: 0.04,
-            snapshot_path: PathBuf::new(),
-            snapshot_period_s: 5.0,
-            load_at_start: false,
-        }
-    }
-}
-
 /// How odometry poses are taken in.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -764,28 +709,7 @@ impl Config {
         check_range("pipeline.region_grow_px", p.region_grow_px as f64, 0.0, 32.0)?;
         check_range("pipeline.max_halves_bend_deg", p.max_halves_bend_deg, 0.0, 45.0)?;
 
-        let m = &self.map;
-        check_range("map.merge_height_tolerance_m", m.merge_height_tolerance_m, 1e-4, 1.0)?;
-        check_range("map.merge_normal_tolerance_deg", m.merge_normal_tolerance_deg, 0.0, 90.0)?;
-        check_range("map.merge_min_overlap", m.merge_min_overlap, 0.0, 1.0)?;
-        check_range("map.drift_sigma_p", m.drift_sigma_p, 1e-12, 1.0)?;
-        check_range("map.drift_sigma_m", m.drift_sigma_m, 1e-12, 1.0)?;
-        check_range("map.horizontal_max_tilt_deg", m.horizontal_max_tilt_deg, 0.0, 90.0)?;
-        check_range("map.vertical_min_tilt_deg", m.vertical_min_tilt_deg, 0.0, 90.0)?;
-        check_range("map.max_vertices", m.max_vertices as f64, 8.0, 4096.0)?;
-        check_range("map.foot_margin_m", m.foot_margin_m, 0.0, 1.0)?;
-        check_range("map.clear_after_frames", m.clear_after_frames as f64, 1.0, 1000.0)?;
-        check_range("map.clear_tolerance_m", m.clear_tolerance_m, 1e-3, 1.0)?;
-        check_range("map.snapshot_period_s", m.snapshot_period_s, 0.1, 86_400.0)?;
-        if m.horizontal_max_tilt_deg >= m.vertical_min_tilt_deg {
-            return Err((
-                "map.horizontal_max_tilt_deg".into(),
-                format!(
-                    "{} must be below vertical_min_tilt_deg = {}",
-                    m.horizontal_max_tilt_deg, m.vertical_min_tilt_deg
-                ),
-            ));
-        }
+        self.map.validate()?;
 
         let q = &self.poses;
         check_range("poses.max_gap_s", q.max_gap_s, 0.001, 10.0)?;

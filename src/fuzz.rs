@@ -134,6 +134,9 @@ fn small_map() -> MapSnapshot {
         frame: crate::map::MapFrame::World,
         drift_z: 0.0,
         drift_var: 0.0,
+        drift_xy: [0.0; 2],
+        drift_yaw: 0.0,
+        drift_covariance: None,
         stair: None,
         polygons: vec![
             square(-0.3, 0.0, 0, Label::Floor),

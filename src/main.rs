@@ -9,7 +9,8 @@ use polymap::config::{Backend, Config};
 use polymap::logs::{Log, LogKind, LogTopics};
 use polymap::mock::vins::MockVinsOptions;
 use polymap::sequence::Sequence;
-use polymap::synth::{self, SceneKind, SynthOptions};
+use polymap::synth::path::Direction;
+use polymap::synth::{self, JumpOptions, SceneKind, SynthOptions};
 
 #[derive(Parser)]
 #[command(name = "polymap", version, about = "Real-time polygonal terrain mapping for legged robots", long_about = None)]
@@ -26,6 +27,9 @@ enum Command {
         out: PathBuf,
         #[arg(long, value_enum, default_value = "straight")]
         scene: SceneKind,
+        /// Up the flight of steps or down it
+        #[arg(long, value_enum, default_value = "up")]
+        walk: Direction,
         /// Image width in pixels; height is 3/4 of it
         #[arg(long, default_value_t = 320)]
         width: u32,
@@ -37,6 +41,15 @@ enum Command {
         /// Vertical drift added to the written poses, mm per frame
         #[arg(long, default_value_t = 0.0)]
         drift: f64,
+        /// Horizontal drift added to the written poses, mm per frame in x and y
+        #[arg(long, num_args = 2, value_names = ["X", "Y"], allow_negative_numbers = true)]
+        drift_xy: Option<Vec<f64>>,
+        /// Yaw drift added to the written poses (about the walk's start), degrees per frame
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        drift_yaw: f64,
+        /// A step of the written poses from frame K on (a loop closure): x, y, z in mm, yaw in degrees
+        #[arg(long, num_args = 5, value_names = ["K", "X", "Y", "Z", "YAW"], allow_negative_numbers = true)]
+        jump: Option<Vec<f64>>,
         #[arg(long, default_value_t = 1)]
         seed: u64,
         /// Frame rate of the stamps, Hz
@@ -134,9 +147,13 @@ enum Command {
         /// Write a top-down picture of the map here (with the truth's tread outlines, if known)
         #[arg(long)]
         render: Option<PathBuf>,
-        /// Turn the vertical drift filter off (to see what it buys)
+        /// Turn the drift filter off (to see what it buys)
         #[arg(long)]
         no_drift_filter: bool,
+        /// Write the drift estimate after every frame (against the injected drift, where the
+        /// sequence's truth has it) to STEM.csv and its plot to STEM.png
+        #[arg(long, value_name = "STEM")]
+        drift_trace: Option<PathBuf>,
         /// Settings from this config file (default: the built-in defaults); its [map]
         /// snapshot settings apply: load at start, save on the period and at the end
         #[arg(long)]
@@ -199,6 +216,10 @@ enum Command {
         /// The mock VINS's IMU-rate propagated poses per second (imu_propagate); 0: none
         #[arg(long, default_value_t = MockVinsOptions::ROBOT.propagate_hz)]
         vins_propagate_hz: f64,
+        /// The mock VINS drifts as a visual-inertial odometry does: x, y, z in mm per second,
+        /// yaw in degrees per second (for example 10 10 5 0.05)
+        #[arg(long, num_args = 4, value_names = ["X", "Y", "Z", "YAW"], allow_negative_numbers = true)]
+        vins_drift: Option<Vec<f64>>,
         /// Also on ROS 1: the mapper and the mock VINS register with the rosmaster
         /// ROS_MASTER_URI names (start one with `roscore`), VINS's poses go over ROS 1
         #[arg(long)]
@@ -221,8 +242,14 @@ enum Command {
         #[arg(long, default_value_t = MockVinsOptions::ROBOT.propagate_hz)]
         propagate_hz: f64,
         /// Vertical drift added to the poses, mm per second
-        #[arg(long, default_value_t = 0.0)]
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
         drift: f64,
+        /// Horizontal drift added to the poses, mm per second in x and y
+        #[arg(long, num_args = 2, value_names = ["X", "Y"], allow_negative_numbers = true)]
+        drift_xy: Option<Vec<f64>>,
+        /// Yaw drift added to the poses (about VINS's origin), degrees per second
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        drift_yaw: f64,
         /// Stop after this many seconds (default: run until interrupted)
         #[arg(long)]
         duration: Option<f64>,
@@ -268,8 +295,40 @@ fn main() {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Synth { out, scene, width, frames, noise, drift, seed, fps, preview } => {
-            let opts = SynthOptions { scene, width, frames, noise_mm: noise, drift_mm_per_frame: drift, seed, fps };
+        Command::Synth {
+            out,
+            scene,
+            walk,
+            width,
+            frames,
+            noise,
+            drift,
+            drift_xy,
+            drift_yaw,
+            jump,
+            seed,
+            fps,
+            preview,
+        } => {
+            let jump = jump.map(|j| match j.as_slice() {
+                &[k, x, y, z, yaw] if k >= 0.0 && k.fract() == 0.0 => {
+                    Ok(JumpOptions { frame: k as usize, xyz_mm: [x, y, z], yaw_deg: yaw })
+                }
+                _ => Err(anyhow::anyhow!("--jump {j:?}: the frame K must be a whole number from 0")),
+            });
+            let opts = SynthOptions {
+                scene,
+                walk,
+                width,
+                frames,
+                noise_mm: noise,
+                drift_mm_per_frame: drift,
+                drift_xy_mm_per_frame: drift_xy.map_or([0.0; 2], |v| [v[0], v[1]]),
+                drift_yaw_deg_per_frame: drift_yaw,
+                jump: jump.transpose()?,
+                seed,
+                fps,
+            };
             if let Some(p) = opts.problem() {
                 bail!("{p}");
             }
@@ -323,12 +382,13 @@ fn run(cli: Cli) -> Result<()> {
             let config = load_config(config, backend)?;
             cli::eval::evaluate(&Sequence::open(&seq)?, &config, json, debug.as_deref())?;
         }
-        Command::Replay { seq, topics, out, render, no_drift_filter, config, backend } => {
+        Command::Replay { seq, topics, out, render, no_drift_filter, drift_trace, config, backend } => {
             let mut config = load_config(config, backend)?;
             if no_drift_filter {
                 config.map.drift_filter = false;
             }
-            cli::replay::replay(&seq, |kind| topics.of(kind), &config, out.as_deref(), render.as_deref())?;
+            let (out, render, trace) = (out.as_deref(), render.as_deref(), drift_trace.as_deref());
+            cli::replay::replay(&seq, |kind| topics.of(kind), &config, out, render, trace)?;
         }
         Command::Bench { seq, backend, frames, config, json, threads } => {
             if let Some(n) = threads {
@@ -378,6 +438,7 @@ fn run(cli: Cli) -> Result<()> {
             vins_latency_ms,
             vins_jitter_ms,
             vins_propagate_hz,
+            vins_drift,
             ros1,
         } => {
             let mut config = load_config(config, None)?;
@@ -393,6 +454,9 @@ fn run(cli: Cli) -> Result<()> {
                     latency_ms: vins_latency_ms,
                     jitter_ms: vins_jitter_ms,
                     propagate_hz: vins_propagate_hz,
+                    drift_mm_per_s: vins_drift.as_ref().map_or(0.0, |d| d[2]),
+                    drift_xy_mm_per_s: vins_drift.as_ref().map_or([0.0; 2], |d| [d[0], d[1]]),
+                    drift_yaw_deg_per_s: vins_drift.as_ref().map_or(0.0, |d| d[3]),
                     ..MockVinsOptions::ROBOT
                 },
             ))?;
@@ -407,7 +471,19 @@ fn run(cli: Cli) -> Result<()> {
                 .with_context(|| format!("writing {}", render.display()))?;
             println!("picture in {}", render.display());
         }
-        Command::MockVins { seq, rate, latency_ms, jitter_ms, propagate_hz, drift, duration, config, ros1 } => {
+        Command::MockVins {
+            seq,
+            rate,
+            latency_ms,
+            jitter_ms,
+            propagate_hz,
+            drift,
+            drift_xy,
+            drift_yaw,
+            duration,
+            config,
+            ros1,
+        } => {
             let mut config = load_config(config, None)?;
             config.ros1.enabled |= ros1;
             let s = Sequence::open(&seq)?;
@@ -417,6 +493,8 @@ fn run(cli: Cli) -> Result<()> {
                 jitter_ms,
                 propagate_hz,
                 drift_mm_per_s: drift,
+                drift_xy_mm_per_s: drift_xy.map_or([0.0; 2], |v| [v[0], v[1]]),
+                drift_yaw_deg_per_s: drift_yaw,
                 duration: duration.map(seconds).transpose()?,
             };
             if let Some(p) = opts.problem() {

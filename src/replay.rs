@@ -11,12 +11,12 @@ use crate::extract::{Extraction, Extractor};
 use crate::map::{MapUpdate, PolygonMap, persist};
 use crate::sequence::Sequence;
 
-/// Maps every frame of `seq` into `map`; `on_frame(k, update)` sees each frame's changes.
+/// Maps every frame of `seq` into `map`; `on_frame(k, update, map)` sees each frame's changes.
 pub fn replay(
     seq: &Sequence,
     config: &Config,
     map: &mut PolygonMap,
-    mut on_frame: impl FnMut(usize, &MapUpdate),
+    mut on_frame: impl FnMut(usize, &MapUpdate, &PolygonMap),
 ) -> Result<()> {
     let mut extractor = Extractor::new(&config.pipeline)?;
     let period = std::time::Duration::from_secs_f64(config.map.snapshot_period_s);
@@ -24,8 +24,8 @@ pub fn replay(
     for k in 0..seq.len() {
         let depth = seq.depth(k)?;
         let Extraction { polygons, depth, .. } = extractor.extract(&depth, &seq.intrinsics)?;
-        let update = map.update(&polygons.polygons, &seq.poses[k].transform, &seq.intrinsics, Some(&depth));
-        on_frame(k, &update);
+        let update = map.update(&polygons.polygons, &seq.poses[k], &seq.intrinsics, Some(&depth));
+        on_frame(k, &update, map);
         if last_save.elapsed() >= period {
             persist::save_configured(map, &config.map)?;
             last_save = Instant::now();

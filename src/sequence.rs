@@ -67,6 +67,52 @@ pub struct Truth {
     /// its written one minus k times this.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub pose_drift_per_frame: f64,
+    /// Horizontal and yaw drift injected into poses.txt beside the vertical one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose_drift: Option<HorizontalDrift>,
+}
+
+/// Drift in x, y and yaw as `polymap synth` injects it: frame k's written pose is D_k times
+/// its true one, D_k a turn by k `yaw_deg_per_frame` about `pivot` (the walk's start, seen
+/// from above) then a shift by k `xy_per_frame`, and after `jump` its step as well.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HorizontalDrift {
+    /// m per frame.
+    pub xy_per_frame: [f64; 2],
+    pub yaw_deg_per_frame: f64,
+    /// m, world.
+    pub pivot: [f64; 2],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub jump: Option<PoseJump>,
+}
+
+/// A step of the odometry (a loop closure) from frame `frame` on: a turn by `yaw_deg` about
+/// the pivot, then a shift by `xyz` (m).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseJump {
+    pub frame: usize,
+    pub xyz: [f64; 3],
+    pub yaw_deg: f64,
+}
+
+impl HorizontalDrift {
+    /// D_k without its vertical part.
+    pub fn at(&self, k: usize) -> nalgebra::Isometry3<f64> {
+        let turn = |deg: f64| {
+            let p = nalgebra::Vector3::new(self.pivot[0], self.pivot[1], 0.0);
+            nalgebra::Translation3::from(p)
+                * nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, deg.to_radians())
+                * nalgebra::Translation3::from(-p)
+        };
+        let [x, y] = self.xy_per_frame.map(|v| v * k as f64);
+        let mut d = nalgebra::Translation3::new(x, y, 0.0) * turn(self.yaw_deg_per_frame * k as f64);
+        if let Some(j) = self.jump.as_ref().filter(|j| k >= j.frame) {
+            d = nalgebra::Translation3::from(nalgebra::Vector3::from(j.xyz)) * turn(j.yaw_deg) * d;
+        }
+        d
+    }
 }
 
 fn is_zero(v: &f64) -> bool {
@@ -76,7 +122,13 @@ fn is_zero(v: &f64) -> bool {
 impl Truth {
     /// Frame k's true pose, from the pose poses.txt gives it.
     pub fn true_pose(&self, k: usize, written: &nalgebra::Isometry3<f64>) -> nalgebra::Isometry3<f64> {
-        nalgebra::Translation3::new(0.0, 0.0, -self.pose_drift_per_frame * k as f64) * written
+        self.drift_at(k).inverse() * written
+    }
+
+    /// D_k: the drift injected into frame k's pose (written = D_k true).
+    pub fn drift_at(&self, k: usize) -> nalgebra::Isometry3<f64> {
+        let horizontal = self.pose_drift.as_ref().map_or_else(nalgebra::Isometry3::identity, |d| d.at(k));
+        nalgebra::Translation3::new(0.0, 0.0, self.pose_drift_per_frame * k as f64) * horizontal
     }
 }
 

@@ -176,6 +176,9 @@ fn snapshot_with(boundary: Vec<[f64; 3]>) -> MapSnapshot {
         frame: polymap::map::MapFrame::World,
         drift_z: 0.0,
         drift_var: 0.0,
+        drift_xy: [0.0; 2],
+        drift_yaw: 0.0,
+        drift_covariance: None,
         stair: None,
         polygons: vec![MapPolygon {
             id: 1,
@@ -395,7 +398,7 @@ fn every_numeric_config_key_given_absurd_values_is_refused_or_handled() {
                     // Handled: the parts that use it run with it.
                     c.pipeline.backend = polymap::config::Backend::Cpu;
                     let mut map = polymap::map::persist::initial_map(&c.map);
-                    polymap::replay::replay(&seq, &c, &mut map, |_, _| {})
+                    polymap::replay::replay(&seq, &c, &mut map, |_, _, _| {})
                         .unwrap_or_else(|e| panic!("{key} = {value}: {e}"));
                     let mut poses =
                         polymap::pose::PoseBuffer::with_limits(10, polymap::pose::PoseLimits::from_config(&c.poses));

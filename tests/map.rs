@@ -2,16 +2,21 @@
 //! convex pieces and insets, snapshots, and bad input.
 
 use geo::{Area, BooleanOps, Coord, LineString, Polygon as Shape};
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3, Vector4};
 use polymap::config::MapConfig;
 use polymap::extract::uncertainty::{Footing, PlaneUncertainty, footing};
 use polymap::extract::{Grid, Polygon, VertexKind};
 use polymap::map::convex::convex_pieces;
-use polymap::map::drift::DriftFilter;
+use polymap::map::drift::{self, DriftFilter, DriftNoise, Row};
 use polymap::map::geometry::top_down;
 use polymap::map::{Label, MapFrame, MapSnapshot, PolygonMap, PolygonProblem, Rejection, SnapshotProblem, persist};
-use polymap::types::Intrinsics;
+use polymap::types::{Intrinsics, Pose};
 use proptest::prelude::*;
+
+/// A pose at one stamp: these frames come without time, so no step of the odometry is looked for.
+fn posed(t: &Isometry3<f64>) -> Pose {
+    Pose { stamp_ns: 0, transform: *t }
+}
 
 /// A camera 2 m up and 2 m back looking 45 deg down along +x, with a wide view (about
 /// 125 deg) so sharp (huge focal length) that outlines are pulled in by micrometres only.
@@ -58,7 +63,7 @@ fn overlapping_views_merge_into_their_true_non_convex_union() {
     let arm_x = rect(0.0, 0.0, 1.0, 0.3);
     let arm_y = rect(0.0, 0.0, 0.3, 1.0);
     for arm in [&arm_x, &arm_x, &arm_y, &arm_y] {
-        map.update(&[seen(arm, 0.0, &pose)], &pose, &intr, None);
+        map.update(&[seen(arm, 0.0, &pose)], &posed(&pose), &intr, None);
     }
     let snap = map.snapshot();
     assert_eq!(snap.polygons.len(), 1, "the arms overlap: one polygon");
@@ -89,8 +94,8 @@ fn mapped(xy: &[[f64; 2]], holes: &[Vec<[f64; 2]>], z: f64) -> polymap::map::Map
     let mut p = seen(xy, z, &pose);
     p.holes = holes.iter().map(|h| seen(h, z, &pose).boundary).collect();
     p.hole_kinds = holes.iter().map(|h| vec![VertexKind::Inside; h.len()]).collect();
-    map.update(&[p.clone()], &pose, &intr, None);
-    map.update(&[p], &pose, &intr, None);
+    map.update(&[p.clone()], &posed(&pose), &intr, None);
+    map.update(&[p], &posed(&pose), &intr, None);
     let snap = map.snapshot();
     assert_eq!(snap.polygons.len(), 1);
     snap.polygons.into_iter().next().unwrap()
@@ -173,6 +178,9 @@ fn the_foothold_answer_lies_inside_the_inset() {
         frame: MapFrame::World,
         drift_z: 0.0,
         drift_var: 0.0,
+        drift_xy: [0.0; 2],
+        drift_yaw: 0.0,
+        drift_covariance: None,
         stair: None,
         polygons: vec![p],
     };
@@ -204,18 +212,18 @@ fn what_one_frame_saw_stays_until_a_later_frame_looks_there_and_does_not_see_it(
     let (pose, intr) = camera();
     let mut map = PolygonMap::new(&MapConfig::default());
     let tread = rect(0.0, 0.0, 0.28, 1.0);
-    map.update(&[seen(&tread, 0.15, &pose)], &pose, &intr, None);
+    map.update(&[seen(&tread, 0.15, &pose)], &posed(&pose), &intr, None);
     // One frame's leak 10 cm past the back edge.
-    map.update(&[seen(&rect(0.0, 0.0, 0.38, 1.0), 0.15, &pose)], &pose, &intr, None);
+    map.update(&[seen(&rect(0.0, 0.0, 0.38, 1.0), 0.15, &pose)], &posed(&pose), &intr, None);
     assert!((map.snapshot().polygons[0].area - 0.38).abs() < 1e-4, "the latest view shows");
     // A camera 1 m over the tread looking straight down sees x in -0.08..0.22 only: the
     // tread's front, not the leak's place.
     let down = polymap::synth::path::camera_pose(Point3::new(0.07, 0.5, 1.15), 0.0, 90f64.to_radians(), 0.0);
-    map.update(&[seen(&rect(0.0, 0.0, 0.22, 1.0), 0.15, &down)], &down, &sharp(1.2e6, 3e5), None);
+    map.update(&[seen(&rect(0.0, 0.0, 0.22, 1.0), 0.15, &down)], &posed(&down), &sharp(1.2e6, 3e5), None);
     let area = map.snapshot().polygons[0].area;
     assert!((area - 0.38).abs() < 1e-4, "a frame that did not look there says nothing of it: area {area}");
     // A frame that looks at the whole tread and sees no leak there.
-    map.update(&[seen(&tread, 0.15, &pose)], &pose, &intr, None);
+    map.update(&[seen(&tread, 0.15, &pose)], &posed(&pose), &intr, None);
     let area = map.snapshot().polygons[0].area;
     assert!((area - 0.28).abs() < 1e-4, "the leak seen once is gone: area {area}");
 }
@@ -252,10 +260,10 @@ fn outlines_are_pulled_in_by_what_their_vertices_lie_on_and_not_at_all_along_a_c
     let back_edge_kept = |back: VertexKind| {
         let mut map = PolygonMap::new(&MapConfig::default());
         for _ in 0..2 {
-            map.update(&[tread(0.0, 0.28, back), riser.clone()], &pose, &intr, None);
+            map.update(&[tread(0.0, 0.28, back), riser.clone()], &posed(&pose), &intr, None);
         }
         // A last, small view of the tread's middle, so the map shows what it keeps for good.
-        map.update(&[tread(0.1, 0.2, VertexKind::Inside), riser.clone()], &pose, &intr, None);
+        map.update(&[tread(0.1, 0.2, VertexKind::Inside), riser.clone()], &posed(&pose), &intr, None);
         let snap = map.snapshot();
         let kept = snap.polygons.iter().find(|p| p.normal[2] > 0.9).expect("the tread is mapped");
         let xs = kept.boundary.iter().map(|v| v[0]);
@@ -280,7 +288,7 @@ fn a_polygon_whose_vertex_kinds_do_not_match_its_vertices_is_refused_with_why() 
     let mut map = PolygonMap::new(&MapConfig::default());
     let mut p = seen(&rect(0.0, 0.0, 1.0, 1.0), 0.0, &pose);
     p.boundary_kinds.pop();
-    let update = map.update(&[p], &pose, &intr, None);
+    let update = map.update(&[p], &posed(&pose), &intr, None);
     assert!(map.is_empty());
     assert_eq!(update.rejected.len(), 1);
     assert!(
@@ -301,16 +309,16 @@ fn polygons_at_different_heights_or_tilts_stay_apart() {
     let mut map = PolygonMap::new(&MapConfig::default());
     let r = rect(0.0, 0.0, 1.0, 1.0);
     // 15 cm apart (two treads), beyond the 5 cm drift tolerance.
-    map.update(&[seen(&r, 0.0, &pose), seen(&r, 0.15, &pose)], &pose, &intr, None);
+    map.update(&[seen(&r, 0.0, &pose), seen(&r, 0.15, &pose)], &posed(&pose), &intr, None);
     assert_eq!(map.len(), 2);
     // 3 cm apart: the same surface.
-    map.update(&[seen(&r, 0.03, &pose)], &pose, &intr, None);
+    map.update(&[seen(&r, 0.03, &pose)], &posed(&pose), &intr, None);
     assert_eq!(map.len(), 2);
     // Tilted 30 deg, beyond the 10 deg normal tolerance.
     let mut tilted = seen(&r, 0.0, &pose);
     let n = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 30f64.to_radians()) * Vector3::from(tilted.normal);
     tilted.normal = [n.x, n.y, n.z];
-    map.update(&[tilted], &pose, &intr, None);
+    map.update(&[tilted], &posed(&pose), &intr, None);
     assert_eq!(map.len(), 3);
 }
 
@@ -320,7 +328,7 @@ fn plane_is_refit_from_all_observations() {
     let mut map = PolygonMap::new(&MapConfig { drift_filter: false, ..MapConfig::default() });
     let r = rect(0.0, 0.0, 1.0, 1.0);
     for z in [0.10, 0.12, 0.14] {
-        map.update(&[seen(&r, z, &pose)], &pose, &intr, None);
+        map.update(&[seen(&r, z, &pose)], &posed(&pose), &intr, None);
     }
     let p = &map.snapshot().polygons[0];
     assert!((p.offset + 0.12).abs() < 1e-9, "plane height {} is the mean 0.12", -p.offset);
@@ -351,7 +359,7 @@ fn the_map_s_plane_covariance_is_its_observations_fused_and_shrinks_as_they_come
     );
     let mut variances = Vec::new();
     for k in 1..=8 {
-        map.update(std::slice::from_ref(&tread), &pose, &intr, None);
+        map.update(std::slice::from_ref(&tread), &posed(&pose), &intr, None);
         let snap = map.snapshot();
         assert_eq!(snap.polygons.len(), 1);
         let p = &snap.polygons[0];
@@ -381,7 +389,7 @@ fn the_map_s_plane_covariance_is_its_observations_fused_and_shrinks_as_they_come
     // A polygon that says nothing of its plane adds nothing.
     let mut unknown = tread.clone();
     unknown.uncertainty = PlaneUncertainty::default();
-    map.update(&[unknown], &pose, &intr, None);
+    map.update(&[unknown], &posed(&pose), &intr, None);
     let p = &map.snapshot().polygons[0];
     assert_eq!(p.observations, 9);
     let v = distance_variance(&p.plane_covariance, p.centroid);
@@ -432,12 +440,12 @@ fn a_map_polygon_becomes_steppable_as_observations_shrink_its_covariance() {
     let tread = tread_tilt_known_to(0.6, 1000, &pose);
     assert_eq!(tread.footing, Footing::TiltUnknown);
     let mut map = PolygonMap::new(&MapConfig::default());
-    map.update(std::slice::from_ref(&tread), &pose, &intr, None);
+    map.update(std::slice::from_ref(&tread), &posed(&pose), &intr, None);
     let snap = map.snapshot();
     assert_eq!(snap.polygons[0].footing, Footing::TiltUnknown);
     assert!(foothold(&snap, on_it).is_none(), "no foothold on a plane not known");
     // Two such views: 0.42 deg, 0.83 at 95 %.
-    map.update(std::slice::from_ref(&tread), &pose, &intr, None);
+    map.update(std::slice::from_ref(&tread), &posed(&pose), &intr, None);
     let snap = map.snapshot();
     assert_eq!((snap.polygons.len(), snap.polygons[0].observations), (1, 2));
     assert_eq!(snap.polygons[0].footing, Footing::Steppable);
@@ -448,11 +456,11 @@ fn a_map_polygon_becomes_steppable_as_observations_shrink_its_covariance() {
     let (small, whole) = (tread_tilt_known_to(0.1, 150, &pose), tread_tilt_known_to(0.1, 400, &pose));
     let mut map = PolygonMap::new(&MapConfig::default());
     for _ in 0..5 {
-        map.update(std::slice::from_ref(&small), &pose, &intr, None);
+        map.update(std::slice::from_ref(&small), &posed(&pose), &intr, None);
     }
     let snap = map.snapshot();
     assert_eq!((snap.polygons[0].footing, snap.polygons[0].pixels), (Footing::FewPixels, 150));
-    map.update(std::slice::from_ref(&whole), &pose, &intr, None);
+    map.update(std::slice::from_ref(&whole), &posed(&pose), &intr, None);
     let snap = map.snapshot();
     assert_eq!((snap.polygons[0].footing, snap.polygons[0].pixels), (Footing::Steppable, 400));
     // A snapshot keeps what made it steppable.
@@ -473,7 +481,7 @@ fn the_map_s_plane_weighs_each_observation_by_how_well_its_plane_is_known() {
     for order in [[&precise, &noisy], [&noisy, &precise]] {
         let mut map = PolygonMap::new(&cfg);
         for tread in order {
-            map.update(std::slice::from_ref(tread), &pose, &intr, None);
+            map.update(std::slice::from_ref(tread), &posed(&pose), &intr, None);
         }
         let snap = map.snapshot();
         assert_eq!(snap.polygons.len(), 1, "one tread");
@@ -489,7 +497,7 @@ fn a_snapshot_keeps_the_plane_covariance_and_weight_so_a_reloaded_map_fuses_on_a
     let cfg = MapConfig { drift_filter: false, ..MapConfig::default() };
     let mut map = PolygonMap::new(&cfg);
     for (z, sigma) in [(0.200, 0.0005), (0.201, 0.001), (0.1995, 0.0008)] {
-        map.update(&[tread_known_to(z, sigma, &pose)], &pose, &intr, None);
+        map.update(&[tread_known_to(z, sigma, &pose)], &posed(&pose), &intr, None);
     }
     let saved = map.snapshot();
     let mut reloaded = PolygonMap::from_snapshot(&cfg, &saved).unwrap();
@@ -503,8 +511,8 @@ fn a_snapshot_keeps_the_plane_covariance_and_weight_so_a_reloaded_map_fuses_on_a
     // One more, noisier view: both maps move the same way, the reloaded one weighing what
     // it had as the three views it fused.
     let next = tread_known_to(0.203, 0.0006, &pose);
-    map.update(std::slice::from_ref(&next), &pose, &intr, None);
-    reloaded.update(std::slice::from_ref(&next), &pose, &intr, None);
+    map.update(std::slice::from_ref(&next), &posed(&pose), &intr, None);
+    reloaded.update(std::slice::from_ref(&next), &posed(&pose), &intr, None);
     let (a, b) = (&map.snapshot().polygons[0], &reloaded.snapshot().polygons[0]);
     let (ha, hb) = (a.height_at(0.4, 0.0), b.height_at(0.4, 0.0));
     assert!((ha - hb).abs() < 2e-6, "heights after one more view: {ha} live, {hb} reloaded");
@@ -515,19 +523,185 @@ fn a_snapshot_keeps_the_plane_covariance_and_weight_so_a_reloaded_map_fuses_on_a
 }
 
 #[test]
-fn drift_filter_follows_the_papers_equations() {
-    let mut f = DriftFilter::new(4e-6, 1e-6);
-    f.predict();
-    assert_eq!(f.var, 4e-6);
-    f.correct(0.01);
-    let k = 4e-6 / (4e-6 + 1e-6);
-    assert!((f.z - k * 0.01).abs() < 1e-15);
-    assert!((f.var - (1.0 - k) * 4e-6).abs() < 1e-18);
+fn drift_filter_follows_the_papers_equations_when_only_heights_are_measured() {
+    let noise = DriftNoise { horizontal: false, ..MapConfig::default().drift_noise() };
+    let mut f = DriftFilter::new(noise);
+    f.predict(&Vector3::zeros());
+    assert_eq!(f.var(), 4e-6);
+    // A floor seen 10 mm above the map's, known to 0.1 mm: a measurement of 10 mm with the
+    // least variance a frame is allowed (1 mm^2) and its own.
+    let floor = |dz: f64| drift::solve(&[Row::point_to_plane(&Vector3::new(1.0, 2.0, 0.0), &Vector3::z(), dz, 1e-8)]);
+    f.correct(&floor(0.01));
+    let k = 4e-6 / (4e-6 + 1e-6 + 1e-8);
+    assert!((f.z - k * 0.01).abs() < 1e-15, "{} against {}", f.z, k * 0.01);
+    assert!((f.var() - (1.0 - k) * 4e-6).abs() < 1e-18);
+    assert_eq!(f.observed, drift::Z);
     for _ in 0..50 {
-        f.predict();
-        f.correct(0.02);
+        f.predict(&Vector3::zeros());
+        f.correct(&floor(0.02 - f.z));
     }
     assert!((f.z - 0.02).abs() < 1e-9, "a constant drift is found: {}", f.z);
+    assert_eq!([f.x, f.y, f.yaw], [0.0; 3], "nothing but the height moves");
+}
+
+#[test]
+fn planes_measure_the_directions_their_normals_span_and_no_other() {
+    // The map frame off by 12 mm, -7 mm, 3 mm and 0.4 deg: rows of three perpendicular planes
+    // at their overlaps' centroids, and the riser's and the wall's headings.
+    let error = Vector4::new(0.012, -0.007, 0.003, 0.4f64.to_radians() * drift::YAW_LEVER_M);
+    let dz_of = |q: &Vector3<f64>, n: &Vector3<f64>| {
+        let moved =
+            q + Vector3::new(error.x, error.y, error.z) + Vector3::z().cross(q) * (error.w / drift::YAW_LEVER_M);
+        -n.dot(&(moved - q))
+    };
+    let plane = |q: Vector3<f64>, n: Vector3<f64>| Row::point_to_plane(&q, &n, dz_of(&q, &n), 1e-6);
+    let floor = plane(Vector3::new(0.5, 0.0, 0.0), Vector3::z());
+    let riser = plane(Vector3::new(1.0, 0.1, 0.07), Vector3::x());
+    let wall = plane(Vector3::new(0.6, 0.8, 0.3), -Vector3::y());
+    let heading = Row::heading(0.4f64.to_radians(), 1e-6);
+    let all = drift::solve(&[floor, riser, wall, heading]);
+    assert_eq!(all.directions.len(), 4);
+    assert!((all.error - error).norm() < 1e-9, "{:?} against {error:?}", all.error);
+    // A straight stair without walls: nothing along its risers.
+    let stair = drift::solve(&[floor, riser, heading, plane(Vector3::new(1.3, -0.2, 0.22), Vector3::x())]);
+    assert_eq!(stair.directions.len(), 3);
+    assert!(stair.directions.iter().all(|(u, _, _)| u.y.abs() < 1e-9), "y is not observed: {:?}", stair.directions);
+    let mut f = DriftFilter::new(MapConfig::default().drift_noise());
+    f.predict(&Vector3::new(0.0, 0.0, 1.0));
+    f.correct(&stair);
+    assert_eq!(f.observed, drift::X | drift::Z | drift::YAW);
+    // Left to the odometry: only the turn's lever on the x shift moves it, by micrometres.
+    assert!(f.y.abs() < 1e-4, "y {}", f.y);
+}
+
+/// A vertical face from `a` to `b` (world, seen from above), `z0` to `z1` high, facing left of
+/// a -> b, as the camera at `pose` sees it.
+fn face(a: [f64; 2], b: [f64; 2], z0: f64, z1: f64, pose: &Isometry3<f64>) -> Polygon {
+    let d = Vector3::new(b[0] - a[0], b[1] - a[1], 0.0).normalize();
+    let n = Vector3::new(-d.y, d.x, 0.0);
+    let boundary = vec![[a[0], a[1], z0], [a[0], a[1], z1], [b[0], b[1], z1], [b[0], b[1], z0]];
+    let world = Polygon {
+        normal: n.into(),
+        offset: -(n.x * a[0] + n.y * a[1]),
+        boundary,
+        boundary_kinds: vec![VertexKind::Inside; 4],
+        ..seen(&rect(0.0, 0.0, 1.0, 1.0), 0.0, &Isometry3::identity())
+    };
+    world.transformed(&pose.inverse())
+}
+
+/// The floor, a riser and a wall in front of the camera: planes with normals in x, y and z.
+fn corner(pose: &Isometry3<f64>) -> Vec<Polygon> {
+    vec![
+        seen(&rect(-1.5, -1.0, 0.5, 0.8), 0.0, pose),
+        face([0.5, 0.6], [0.5, -0.6], 0.0, 0.15, pose),
+        face([0.9, 0.8], [-1.0, 0.8], 0.0, 0.6, pose),
+        seen(&rect(0.5, -0.6, 0.8, 0.6), 0.15, pose),
+    ]
+}
+
+/// The drift a walk with odometry off by `d` at `k`: D_k = d^k, about the origin.
+fn drift_at(k: f64, per_frame: [f64; 4]) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(per_frame[0] * k, per_frame[1] * k, per_frame[2] * k),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, (per_frame[3] * k).to_radians()),
+    )
+}
+
+#[test]
+fn a_riser_and_a_wall_take_horizontal_and_yaw_drift_out_of_the_map() {
+    let (pose, intr) = camera();
+    let mut map = PolygonMap::new(&MapConfig::default());
+    let per_frame = [0.0005, -0.0003, 0.0002, 0.01];
+    for k in 0..=40 {
+        // The planes are where they are; the odometry says the camera is elsewhere.
+        let odometry = drift_at(k as f64, per_frame) * pose;
+        map.update(&corner(&pose), &posed(&odometry), &intr, None);
+    }
+    let truth = drift_at(40.0, per_frame);
+    let d = &map.drift;
+    let t = truth.translation.vector;
+    assert!((d.x - t.x).abs() < 1e-3 && (d.y - t.y).abs() < 1e-3 && (d.z - t.z).abs() < 1e-3, "{d:?} against {t:?}");
+    // The map's own planes take in a little of each frame's turn before it is measured.
+    assert!((d.yaw.to_degrees() - 0.4).abs() < 0.1, "yaw {} deg", d.yaw.to_degrees());
+    assert_eq!(d.observed, drift::X | drift::Y | drift::Z | drift::YAW);
+    let snap = map.snapshot();
+    assert_eq!(snap.polygons.len(), 4, "nothing smeared into a second copy");
+    let riser = snap.polygons.iter().find(|p| p.normal[0].abs() > 0.9).unwrap();
+    let wall = snap.polygons.iter().find(|p| p.normal[1].abs() > 0.9).unwrap();
+    assert!((riser.centroid[0] - 0.5).abs() < 2e-3, "the riser stays at x = 0.5: {:?}", riser.centroid);
+    assert!((wall.centroid[1] - 0.8).abs() < 2e-3, "the wall stays at y = 0.8: {:?}", wall.centroid);
+    // Without the horizontal filter the same walk moves the riser by the drift.
+    let cfg = MapConfig { drift_horizontal: false, ..MapConfig::default() };
+    let mut vertical = PolygonMap::new(&cfg);
+    for k in 0..=40 {
+        vertical.update(&corner(&pose), &posed(&(drift_at(k as f64, per_frame) * pose)), &intr, None);
+    }
+    let moved = vertical.snapshot();
+    let riser = moved.polygons.iter().find(|p| p.normal[0].abs() > 0.9).unwrap();
+    assert!((riser.centroid[0] - 0.5).abs() > 5e-3, "the feature is what holds it: {:?}", riser.centroid);
+}
+
+#[test]
+fn a_wrong_match_does_not_move_the_map() {
+    let (pose, intr) = camera();
+    let mut map = PolygonMap::new(&MapConfig::default());
+    // A box the size of a tread beside the stair, its face towards the camera.
+    let the_box = |x: f64, pose: &Isometry3<f64>| face([x, -0.2], [x, -0.5], 0.0, 0.3, pose);
+    for _ in 0..3 {
+        let mut frame = corner(&pose);
+        frame.push(the_box(-0.3, &pose));
+        map.update(&frame, &posed(&pose), &intr, None);
+    }
+    let before = map.drift;
+    // The box moves 3 cm a frame (within the merge tolerance), and a tread is seen a step up
+    // from where it is (a mismatch of steps): neither pulls the drift.
+    for k in 1..=5 {
+        let mut frame = corner(&pose);
+        frame.push(the_box(-0.3 + 0.03 * k as f64, &pose));
+        frame.push(seen(&rect(0.5, -0.6, 0.8, 0.6), 0.30, &pose));
+        map.update(&frame, &posed(&pose), &intr, None);
+    }
+    let d = map.drift;
+    assert!(
+        (d.x - before.x).abs() < 5e-4 && (d.y - before.y).abs() < 5e-4 && (d.z - before.z).abs() < 5e-4,
+        "{before:?} -> {d:?}"
+    );
+    assert!(d.yaw.abs() < 0.01f64.to_radians(), "yaw {} deg", d.yaw.to_degrees());
+    assert!(map.counters.registration_outliers > 0, "the box's rows were dropped");
+    let riser = map.snapshot().polygons.into_iter().find(|p| p.normal[0].abs() > 0.9 && p.centroid[0] > 0.4).unwrap();
+    assert!((riser.centroid[0] - 0.5).abs() < 1e-3, "{:?}", riser.centroid);
+}
+
+#[test]
+fn a_step_of_the_odometry_is_taken_into_the_drift_not_the_map() {
+    let (start, intr) = camera();
+    let mut map = PolygonMap::new(&MapConfig::default());
+    let (step_m, step_deg) = (0.08, 1.0f64);
+    let mut stepped_at = Vec::new();
+    for k in 0..30u64 {
+        // Walking 1 cm a frame at 30 Hz; from frame 15 the odometry has relocalised.
+        let pose = Translation3::new(0.01 * k as f64, 0.0, 0.0) * start;
+        let odometry = match k >= 15 {
+            true => {
+                Translation3::new(step_m, 0.0, 0.0)
+                    * UnitQuaternion::from_euler_angles(0.0, 0.0, step_deg.to_radians())
+                    * pose
+            }
+            false => pose,
+        };
+        let update = map.update(&corner(&pose), &Pose { stamp_ns: k * 33_333_333, transform: odometry }, &intr, None);
+        if update.odometry_step {
+            stepped_at.push(k);
+        }
+    }
+    assert_eq!(stepped_at, vec![15], "one step, when it happened");
+    assert_eq!(map.counters.odometry_steps, 1);
+    assert!((map.drift.yaw.to_degrees() - step_deg).abs() < 0.02, "yaw {} deg", map.drift.yaw.to_degrees());
+    let snap = map.snapshot();
+    assert_eq!(snap.polygons.len(), 4, "nothing smeared into a second copy");
+    let riser = snap.polygons.iter().find(|p| p.normal[0].abs() > 0.9).unwrap();
+    assert!((riser.centroid[0] - 0.5).abs() < 2e-3, "{:?}", riser.centroid);
 }
 
 #[test]
@@ -536,12 +710,12 @@ fn drift_is_measured_on_matched_horizontals_and_taken_out() {
     let mut map = PolygonMap::new(&MapConfig::default());
     let floor = rect(-1.0, -1.0, 1.0, 1.0);
     let tread = rect(1.0, -0.5, 1.28, 0.5);
-    map.update(&[seen(&floor, 0.0, &pose), seen(&tread, 0.15, &pose)], &pose, &intr, None);
+    map.update(&[seen(&floor, 0.0, &pose), seen(&tread, 0.15, &pose)], &posed(&pose), &intr, None);
     // The odometry drifts up 1 mm a frame: everything seems to sink.
     for k in 1..=60 {
         let drifted = Translation3::new(0.0, 0.0, 0.001 * k as f64) * pose;
         let polys = [seen(&floor, 0.0, &pose), seen(&tread, 0.15, &pose)];
-        map.update(&polys, &drifted, &intr, None);
+        map.update(&polys, &posed(&drifted), &intr, None);
     }
     assert!((map.drift.z - 0.060).abs() < 0.002, "drift estimate {} after 60 mm", map.drift.z);
     let snap = map.snapshot();
@@ -577,7 +751,7 @@ fn labels_name_a_staircase() {
         footing: polymap::extract::Footing::Steppable,
     };
     polys.push(riser.transformed(&pose.inverse()));
-    map.update(&polys, &pose, &intr, None);
+    map.update(&polys, &posed(&pose), &intr, None);
     let snap = map.snapshot();
     let label_at = |z: f64| {
         let p = snap.polygons.iter().find(|p| p.label.is_horizontal() && (p.centroid[2] - z).abs() < 0.01).unwrap();
@@ -605,7 +779,7 @@ fn bad_polygons_and_poses_are_refused_and_counted() {
     not_unit.normal = [0.0, 0.0, 2.0];
     let mut two = good.clone();
     two.boundary.truncate(2);
-    let update = map.update(&[nan, not_unit, two, good.clone()], &pose, &intr, None);
+    let update = map.update(&[nan, not_unit, two, good.clone()], &posed(&pose), &intr, None);
     assert_eq!(update.rejected.len(), 3, "{:?}", update.rejected);
     let problems: Vec<&PolygonProblem> = update
         .rejected
@@ -629,7 +803,7 @@ fn bad_polygons_and_poses_are_refused_and_counted() {
     let mut bad_pose = pose;
     bad_pose.translation.x = f64::INFINITY;
     let before = map.snapshot();
-    let update = map.update(&[good], &bad_pose, &intr, None);
+    let update = map.update(&[good], &posed(&bad_pose), &intr, None);
     assert!(update.rejected.iter().any(|r| matches!(r, Rejection::Pose { .. }) && r.to_string().contains("pose")));
     assert_eq!(map.snapshot(), before, "a bad pose leaves the map as it was");
     assert_eq!(map.counters.rejected, 4);
@@ -641,7 +815,7 @@ fn snapshots_round_trip_and_corrupt_files_are_moved_aside() {
     let cfg = MapConfig::default();
     let mut map = PolygonMap::new(&cfg);
     for _ in 0..2 {
-        map.update(&[seen(&rect(0.0, 0.0, 1.0, 0.5), 0.0, &pose)], &pose, &intr, None);
+        map.update(&[seen(&rect(0.0, 0.0, 1.0, 0.5), 0.0, &pose)], &posed(&pose), &intr, None);
     }
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("map.json");
@@ -839,13 +1013,13 @@ fn clearing_reaches_the_corners_of_the_view_and_nothing_outside_it() {
     let corner = tile(floor_at(6.0, 6.0), 0.03);
     let behind = tile([-10.0, 0.0], 0.2);
     let mut map = PolygonMap::new(&MapConfig::default());
-    map.update(&[centre, corner, behind], &pose, &intr, None);
+    map.update(&[centre, corner, behind], &posed(&pose), &intr, None);
     assert_eq!(map.len(), 3);
     // The depth image sees 4 m further than the floor everywhere: through the floor tiles.
     let depth = Grid { width: 320, height: 240, data: vec![8.0f32; 320 * 240] };
     let mut removed = Vec::new();
     for _ in 0..MapConfig::default().clear_after_frames {
-        removed.extend(map.update(&[], &pose, &intr, Some(&depth)).removed);
+        removed.extend(map.update(&[], &posed(&pose), &intr, Some(&depth)).removed);
     }
     removed.sort_unstable();
     assert_eq!(removed, vec![1, 2], "the tiles in view, the one at the image's corner too, are cleared");

@@ -34,6 +34,7 @@ fn truth() -> Truth {
     Truth {
         stair: Some(StairTruth { kind: "straight".into(), steps: 1, rise: 0.15, going: 0.28, width: 1.0 }),
         pose_drift_per_frame: 0.0,
+        pose_drift: None,
         polygons: vec![TruthPolygon {
             label: "tread".into(),
             step: Some(1),

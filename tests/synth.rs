@@ -324,6 +324,47 @@ fn synth_is_deterministic_for_a_seed() {
 }
 
 #[test]
+fn horizontal_drift_and_a_step_move_the_written_poses_and_the_truth_undoes_them() {
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let opts = SynthOptions { width: 32, frames: 6, ..SynthOptions::default() };
+    synth::generate(&opts, a.path(), |_, _| {}).unwrap();
+    let drifting = SynthOptions {
+        drift_xy_mm_per_frame: [1.0, -2.0],
+        drift_yaw_deg_per_frame: 0.1,
+        jump: Some(synth::JumpOptions { frame: 3, xyz_mm: [50.0, 0.0, 10.0], yaw_deg: 1.0 }),
+        ..opts.clone()
+    };
+    synth::generate(&drifting, b.path(), |_, _| {}).unwrap();
+    let (sa, sb) = (Sequence::open(a.path()).unwrap(), Sequence::open(b.path()).unwrap());
+    let tb = sb.truth.clone().unwrap();
+    let heading = |t: &nalgebra::Isometry3<f64>| {
+        let axis = t.rotation * Vector3::z();
+        axis.y.atan2(axis.x).to_degrees()
+    };
+    for k in 0..6 {
+        let (exact, written) = (&sa.poses[k].transform, &sb.poses[k].transform);
+        let turned = heading(written) - heading(exact);
+        let want = 0.1 * k as f64 + if k >= 3 { 1.0 } else { 0.0 };
+        // poses.txt keeps its quaternions to about 1e-8.
+        assert!((turned - want).abs() < 1e-5, "frame {k}: turned {turned} deg, not {want}");
+        let stepped_up = written.translation.z - exact.translation.z;
+        assert!((stepped_up - if k >= 3 { 0.01 } else { 0.0 }).abs() < 1e-7, "frame {k}: {stepped_up}");
+        let undone = tb.true_pose(k, written);
+        assert!(
+            (undone.translation.vector - exact.translation.vector).norm() < 1e-6,
+            "frame {k}: the true pose is recovered"
+        );
+        assert!(undone.rotation.angle_to(&exact.rotation) < 1e-6);
+    }
+    let pivot = tb.pose_drift.as_ref().unwrap().pivot;
+    assert_eq!(
+        pivot,
+        [sa.poses[0].transform.translation.x, sa.poses[0].transform.translation.y],
+        "about the walk's start"
+    );
+}
+
+#[test]
 fn drift_moves_the_written_poses_up_not_the_truth() {
     let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
     let opts = SynthOptions { width: 32, frames: 5, ..SynthOptions::default() };

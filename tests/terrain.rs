@@ -18,7 +18,7 @@ fn the_terrain_grid_holds_each_surface_at_its_plane_height_and_nan_off_every_sur
     let mut config = Config::default();
     config.pipeline.backend = Backend::Cpu;
     let mut map = PolygonMap::new(&config.map);
-    polymap::replay::replay(&seq, &config, &mut map, |_, _| {}).unwrap();
+    polymap::replay::replay(&seq, &config, &mut map, |_, _, _| {}).unwrap();
     let snapshot = map.snapshot();
     let treads: Vec<&MapPolygon> = snapshot.polygons.iter().filter(|p| p.label == Label::Tread).collect();
     assert!(treads.len() >= 5, "{} treads mapped", treads.len());

@@ -288,7 +288,7 @@ pub fn evaluate_map(s: &Sequence, path: &Path, json: bool, debug: Option<&Path>)
     }
     let m = &summary;
     println!(
-        "treads found {}/{}; IOU mean {:.3} (min {:.3}); alpha mean {:.3} deg, std {:.3} deg; step-height error mean {:.2} mm, std {:.2} mm; height error mean {:.2} mm, max {:.2} mm; drift estimate off by {:.2} mm",
+        "treads found {}/{}; IOU mean {:.3} (min {:.3}); alpha mean {:.3} deg, std {:.3} deg; step-height error mean {:.2} mm, std {:.2} mm; height error mean {:.2} mm, max {:.2} mm; drift estimate off by {:.2} mm (horizontally {:.2} mm, in yaw {:.3} deg)",
         m.treads_found,
         m.treads_seen,
         m.iou_mean,
@@ -299,7 +299,9 @@ pub fn evaluate_map(s: &Sequence, path: &Path, json: bool, debug: Option<&Path>)
         m.step_error_std_mm,
         m.height_error_mean_mm,
         m.height_error_max_mm,
-        m.drift_error_mm
+        m.drift_error_mm,
+        m.drift_error_xy_mm,
+        m.drift_error_yaw_deg
     );
     println!(
         "steppable treads {}/{}, worst tilt {:.3} deg; level map polygons (>= {} m2, within {} deg of level) {}, steppable {}, worst steppable tilt {:.3} deg",

@@ -7,6 +7,7 @@ use anyhow::{Context, Result, bail};
 
 use super::progress;
 use crate::config::Config;
+use crate::eval::drift;
 use crate::logs::{Log, LogKind, LogTopics};
 use crate::map::persist::initial_map;
 use crate::map::render::top_down;
@@ -21,6 +22,7 @@ pub fn replay(
     config: &Config,
     out: Option<&Path>,
     render: Option<&Path>,
+    drift_trace: Option<&Path>,
 ) -> Result<()> {
     if let Some(log) = Log::find(seq)? {
         let mut map = initial_map(&config.map);
@@ -37,6 +39,9 @@ pub fn replay(
         if let Some(path) = out {
             write_json(&mut map, path)?;
         }
+        if drift_trace.is_some() {
+            bail!("--drift-trace takes a sequence (its truth has the drift injected), not a log");
+        }
         if let Some(path) = render {
             top_down(&map.snapshot(), None).save(path).with_context(|| format!("writing {}", path.display()))?;
         }
@@ -45,8 +50,20 @@ pub fn replay(
     let s = Sequence::open(seq)?;
     let mut map = initial_map(&config.map);
     let bar = progress(s.len() as u64, "replay");
-    replay_sequence(&s, config, &mut map, |_, _| bar.inc(1))?;
+    let mut trace = Vec::new();
+    replay_sequence(&s, config, &mut map, |k, update, map| {
+        bar.inc(1);
+        trace.push(drift::sample(k, map, update, s.truth.as_ref()));
+    })?;
     bar.finish_and_clear();
+    if let Some(stem) = drift_trace {
+        let with = |ext: &str| std::path::PathBuf::from(format!("{}.{ext}", stem.display()));
+        let (csv, png) = (with("csv"), with("png"));
+        drift::write_csv(&trace, &csv).with_context(|| format!("writing {}", csv.display()))?;
+        let name = s.dir.file_name().map_or(s.dir.display().to_string(), |n| n.to_string_lossy().into_owned());
+        let title = format!("{name}: injected black, estimated blue (2 sigma shaded)");
+        drift::plot(&trace, &title).save(&png).with_context(|| format!("writing {}", png.display()))?;
+    }
     let c = map.counters;
     println!(
         "{}: {} frames -> {} map polygons ({} merges, {} cleared, {} rejected); drift {:.1} mm (sd {:.1} mm)",
@@ -57,7 +74,7 @@ pub fn replay(
         c.cleared,
         c.rejected,
         map.drift.z * 1e3,
-        map.drift.var.sqrt() * 1e3
+        map.drift.var().sqrt() * 1e3
     );
     if let Some(st) = map.stair() {
         println!(

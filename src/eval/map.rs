@@ -6,7 +6,7 @@
 //! rasterised on a 2 mm grid and a cell counts as seen when it projects, with the frame's
 //! true pose, onto a pixel that labels/ gives to that tread. IOU is measured on that grid.
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use serde::Serialize;
 
 use super::{mean_std, min_visible_pixels, treads, world_tilt_deg};
@@ -58,6 +58,10 @@ pub struct MapSummary {
     pub height_error_max_mm: f64,
     /// The map's drift estimate minus the drift injected into the last frame's pose, mm.
     pub drift_error_mm: f64,
+    /// Where the map's drift estimate puts the last frame's camera against where it was,
+    /// seen from above, mm; and its yaw's error, degrees.
+    pub drift_error_xy_mm: f64,
+    pub drift_error_yaw_deg: f64,
     /// Treads found whose polygon is steppable, and the largest tilt of those, degrees.
     pub treads_steppable: usize,
     pub steppable_tread_alpha_max_deg: f64,
@@ -198,7 +202,15 @@ pub fn score_map_seen_in(
 
 pub fn summarise(scores: &[MapTreadScore], map: &MapSnapshot, seq: &Sequence) -> MapSummary {
     let rise = seq.truth.as_ref().and_then(|t| t.stair.as_ref()).map_or(f64::NAN, |s| s.rise);
-    let injected = seq.truth.as_ref().map_or(0.0, |t| t.pose_drift_per_frame * seq.len().saturating_sub(1) as f64);
+    let last = seq.len().saturating_sub(1);
+    let injected = seq.truth.as_ref().map_or_else(Isometry3::identity, |t| t.drift_at(last));
+    let estimated = Isometry3::from_parts(
+        Translation3::new(map.drift_xy[0], map.drift_xy[1], map.drift_z),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, map.drift_yaw),
+    );
+    let camera = injected.inverse() * Point3::from(seq.poses[last].transform.translation.vector);
+    let off = estimated.inverse() * (injected * camera) - camera;
+    let yaw_off = (estimated.inverse() * injected).rotation.euler_angles().2;
     let ious: Vec<f64> = scores.iter().map(|s| s.iou).collect();
     let alphas: Vec<f64> = scores.iter().filter_map(|s| s.alpha_deg).collect();
     let heights: Vec<f64> = scores.iter().filter_map(|s| s.height_error).map(|e| e * 1e3).collect();
@@ -228,7 +240,9 @@ pub fn summarise(scores: &[MapTreadScore], map: &MapSnapshot, seq: &Sequence) ->
         step_error_std_mm,
         height_error_mean_mm: mean_std(&heights).0,
         height_error_max_mm: heights.iter().copied().fold(f64::NAN, f64::max),
-        drift_error_mm: (map.drift_z - injected) * 1e3,
+        drift_error_mm: (map.drift_z - injected.translation.z) * 1e3,
+        drift_error_xy_mm: off.xy().norm() * 1e3,
+        drift_error_yaw_deg: yaw_off.to_degrees(),
         treads_steppable: steppable.len(),
         steppable_tread_alpha_max_deg: steppable.iter().filter_map(|s| s.alpha_deg).fold(f64::NAN, f64::max),
         level_polygons: level.len(),

@@ -7,6 +7,7 @@
 //! filled, then compared with the label mask of the tread, which is exactly the part of
 //! the truth polygon the camera sees.
 
+pub mod drift;
 pub mod map;
 pub mod segmentation;
 

@@ -185,6 +185,9 @@ pub fn snapshot_of(m: &Map) -> MapSnapshot {
         frame: MapFrame::World,
         drift_z: m.drift_z,
         drift_var: m.drift_var,
+        drift_xy: [0.0; 2],
+        drift_yaw: 0.0,
+        drift_covariance: None,
         stair: None,
         polygons: m.polygons.iter().filter_map(map_polygon_of).collect(),
     }
@@ -273,16 +276,22 @@ pub fn whole_map_markers(m: &Map) -> MarkerArray {
 }
 
 /// The drift as a transform: `odometry_frame` (VINS's) seen from `map_frame`, which is
-/// VINS's frame with the drift taken out, so a point p in VINS's frame is p - (0, 0, drift_z)
-/// in the map frame.
-pub fn drift_transform(stamp_ns: StampNs, map_frame: &str, odometry_frame: &str, drift_z: f64) -> TfMessage {
+/// VINS's frame with the drift taken out: a point p in VINS's frame is `map_from_odometry` p
+/// in the map frame (a turn about z and a shift).
+pub fn drift_transform(
+    stamp_ns: StampNs,
+    map_frame: &str,
+    odometry_frame: &str,
+    map_from_odometry: &nalgebra::Isometry3<f64>,
+) -> TfMessage {
+    let (t, q) = (map_from_odometry.translation.vector, map_from_odometry.rotation);
     TfMessage {
         transforms: vec![TransformStamped {
             header: header(stamp_ns, map_frame),
             child_frame_id: odometry_frame.into(),
             transform: Transform {
-                translation: Vector3 { x: 0.0, y: 0.0, z: -drift_z },
-                rotation: Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 },
+                translation: Vector3 { x: t.x, y: t.y, z: t.z },
+                rotation: Quaternion { x: q.i, y: q.j, z: q.k, w: q.w },
             },
         }],
     }

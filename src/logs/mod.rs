@@ -23,6 +23,7 @@ use crate::pose::{PoseBuffer, PoseLimits, RawPose};
 use crate::ros1::Ros1Message;
 use crate::ros2::cdr;
 use crate::ros2::msg::{CameraInfo, Image, Odometry, PoseStamped};
+use crate::types::Pose;
 use bag::BagReader;
 use mcap::McapReader;
 
@@ -349,7 +350,8 @@ pub fn replay(
                         .extract(&frame, &intrinsics)
                         .with_context(|| format!("{path}: the image stamped {} ns", frame.stamp_ns))?;
                     let t_world_camera = crate::pose::world_camera(&world_body, &body_camera);
-                    map.update(&polygons.polygons, &t_world_camera, &intrinsics, Some(&depth));
+                    let pose = Pose { stamp_ns: frame.stamp_ns, transform: t_world_camera };
+                    map.update(&polygons.polygons, &pose, &intrinsics, Some(&depth));
                     out.mapped += 1;
                 }
                 Err(_) => out.without_pose += 1,

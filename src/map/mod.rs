@@ -25,6 +25,7 @@ pub mod geometry;
 pub mod labels;
 mod observe;
 pub mod persist;
+mod register;
 pub mod render;
 mod snapshot;
 mod types;
@@ -33,7 +34,7 @@ pub mod validate;
 use std::collections::BTreeMap;
 
 use geo::{Area, BooleanOps, Centroid, Contains, Coord, MinimumRotatedRect, Point, Polygon as Shape};
-use nalgebra::{Isometry3, Point3, Translation3, Vector3};
+use nalgebra::{Isometry3, Matrix4, Point3, Vector3};
 use rstar::primitives::{GeomWithData, Rectangle};
 use rstar::{AABB, RTree};
 use serde::{Deserialize, Serialize};
@@ -41,13 +42,14 @@ use serde::{Deserialize, Serialize};
 use crate::config::MapConfig;
 use crate::extract::uncertainty::{Footing, PlaneUncertainty, footing, in_plane_axes};
 use crate::extract::{Grid, Polygon, VertexKind};
-use crate::types::Intrinsics;
+use crate::types::{Intrinsics, Pose};
 use clearing::*;
 use drift::DriftFilter;
 use fusion::*;
 use geometry::{Moments, Plane, PlaneFrame, ViewPyramid};
 pub use labels::{Label, Stair};
 use observe::*;
+pub use register::Registration;
 use types::unknown_covariance;
 pub use types::{MapCounters, MapFrame, MapPolygon, MapSnapshot, MapUpdate, Region};
 pub use validate::{PolygonProblem, Rejection, SnapshotProblem, polygon_problem};
@@ -94,7 +96,6 @@ struct Observation {
     /// The pixels its frame saw it with (a snapshot: the most any frame did).
     pixels: u32,
     aabb: [[f64; 3]; 2],
-    horizontal: bool,
     /// How far each vertex of its outline (then of each hole) is pulled in before what it
     /// bounds is kept, m: its outline's uncertainty where that vertex was seen.
     erode: Vec<f64>,
@@ -124,6 +125,8 @@ struct Match {
     id: u64,
     area: f64,
     dz: f64,
+    /// The overlap's centroid on the map polygon's plane frame, world.
+    at: Vector3<f64>,
 }
 
 #[derive(Clone)]
@@ -137,6 +140,8 @@ pub struct PolygonMap {
     label_table: labels::Table,
     next_id: u64,
     pub drift: DriftFilter,
+    /// The last frames' corrected poses: what tells a step of the odometry from motion.
+    track: register::Track,
     /// One more with every frame merged: what a client applied up to.
     version: u64,
     stair: Option<Stair>,
@@ -162,7 +167,8 @@ impl PolygonMap {
             index: RTree::new(),
             label_table: labels::Table::new(cfg.horizontal_max_tilt_deg, cfg.vertical_min_tilt_deg),
             next_id: 1,
-            drift: DriftFilter::new(cfg.drift_sigma_p, cfg.drift_sigma_m),
+            drift: DriftFilter::new(cfg.drift_noise()),
+            track: register::Track::default(),
             version: 0,
             stair: None,
             counters: MapCounters::default(),
@@ -190,25 +196,28 @@ impl PolygonMap {
 
     /// The pose with the drift estimate taken out: what the map's frame says the camera is.
     pub fn corrected(&self, t_world_camera: &Isometry3<f64>) -> Isometry3<f64> {
-        Translation3::new(0.0, 0.0, -self.drift.z) * t_world_camera
+        self.drift.transform().inverse() * t_world_camera
     }
 
-    /// Merges one frame: `polygons` in the camera frame, `t_world_camera` the odometry's pose,
-    /// `depth_m` the frame's depth in metres for clearing (None: nothing is cleared).
+    /// Merges one frame: `polygons` in the camera frame, `pose` the odometry's (its stamp
+    /// tells a step of the odometry from motion), `depth_m` the frame's depth in metres for
+    /// clearing (None: nothing is cleared).
     pub fn update(
         &mut self,
         polygons: &[Polygon],
-        t_world_camera: &Isometry3<f64>,
+        pose: &Pose,
         intrinsics: &Intrinsics,
         depth_m: Option<&Grid<f32>>,
     ) -> MapUpdate {
+        let t_world_camera = &pose.transform;
         let mut update = MapUpdate::default();
         self.counters.frames += 1;
         self.counters.polygons_in += polygons.len() as u64;
         let Some(valid) = self.admit(polygons, t_world_camera, &mut update) else { return update };
         self.version += 1;
         if self.cfg.drift_filter {
-            update.drift_measured = self.measure_drift(&valid, t_world_camera, intrinsics);
+            update.odometry_step = self.take_odometry_step(&valid, pose, intrinsics);
+            update.registration = self.register(&valid, t_world_camera, intrinsics);
         }
         let touched = self.merge_frame(&valid, t_world_camera, intrinsics, &mut update);
         update.placed = valid.iter().map(|p| p.id).zip(touched.iter().copied()).collect();
@@ -216,6 +225,7 @@ impl PolygonMap {
             self.clear_contradicted(&touched, t_world_camera, depth_m, intrinsics, &mut update);
         }
         self.settle(&touched, &mut update);
+        self.track.push(pose.stamp_ns, self.corrected(t_world_camera));
         update
     }
 
@@ -250,38 +260,6 @@ impl PolygonMap {
             tracing::warn!("map: {why}");
         }
         pose_finite.then_some(valid)
-    }
-
-    /// Drift: predicted, measured on the frame's horizontal polygons that match horizontal
-    /// map polygons (area-weighted height difference), corrected. Returns the measurement.
-    fn measure_drift(
-        &mut self,
-        valid: &[&Polygon],
-        t_world_camera: &Isometry3<f64>,
-        intrinsics: &Intrinsics,
-    ) -> Option<f64> {
-        self.drift.predict();
-        let obs = self.observations(valid, t_world_camera, intrinsics);
-        let (mut weight, mut sum) = (0.0, 0.0);
-        for o in obs.iter().filter(|o| o.horizontal) {
-            for m in self.matches(o) {
-                if self.label_table.labelled(m.id).0.is_horizontal() {
-                    weight += m.area;
-                    sum += m.area * m.dz * self.entries[&m.id].frame.normal.z;
-                }
-            }
-        }
-        if weight <= 0.0 {
-            return None;
-        }
-        let measured = self.drift.z + sum / weight;
-        self.drift.correct(measured);
-        tracing::debug!(
-            "drift measured {:.1} mm over {weight:.3} m^2 -> estimate {:.1} mm",
-            measured * 1e3,
-            self.drift.z * 1e3
-        );
-        Some(measured)
     }
 
     /// Each polygon, drift taken out, merged into the map polygons it matches (bridged ones

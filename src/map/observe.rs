@@ -49,7 +49,6 @@ impl PolygonMap {
                     moments,
                     uncertainty: w.uncertainty,
                     pixels: u32::try_from(w.pixel_count).unwrap_or(u32::MAX),
-                    horizontal,
                     erode,
                     erode_holes,
                     view: Some(view),
@@ -88,7 +87,7 @@ impl PolygonMap {
             };
             let dz = t_obs - t_map;
             if dz.abs() <= tol {
-                out.push(Match { id, area, dz });
+                out.push(Match { id, area, dz, at: q });
             }
         }
         out

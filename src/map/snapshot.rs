@@ -10,7 +10,10 @@ impl PolygonMap {
             version: self.version,
             frame: MapFrame::World,
             drift_z: self.drift.z,
-            drift_var: self.drift.var,
+            drift_var: self.drift.var(),
+            drift_xy: [self.drift.x, self.drift.y],
+            drift_yaw: self.drift.yaw,
+            drift_covariance: Some(self.drift.cov),
             stair: self.stair.clone(),
             polygons,
         }
@@ -19,12 +22,22 @@ impl PolygonMap {
     /// A map rebuilt from a snapshot: each polygon's moments are its surface's, weighted by
     /// its observations, so later frames refine it as if it had been seen all along.
     pub fn from_snapshot(cfg: &MapConfig, s: &MapSnapshot) -> Result<PolygonMap, SnapshotProblem> {
-        if !(s.drift_z.is_finite() && s.drift_var.is_finite() && s.drift_var >= 0.0) {
+        let finite = [s.drift_z, s.drift_xy[0], s.drift_xy[1], s.drift_yaw].iter().all(|v| v.is_finite())
+            && s.drift_covariance.iter().flatten().flatten().all(|v| v.is_finite());
+        let variances_ok = match s.drift_covariance {
+            Some(c) => (0..4).all(|k| c[k][k] >= 0.0) && c[2][2] == s.drift_var,
+            None => true,
+        };
+        if !(finite && s.drift_var.is_finite() && s.drift_var >= 0.0 && variances_ok) {
             return Err(SnapshotProblem::Drift { z: s.drift_z, var: s.drift_var });
         }
         let mut map = PolygonMap::new(cfg);
-        map.drift.z = s.drift_z;
-        map.drift.var = s.drift_var;
+        (map.drift.x, map.drift.y, map.drift.z, map.drift.yaw) = (s.drift_xy[0], s.drift_xy[1], s.drift_z, s.drift_yaw);
+        map.drift.cov = s.drift_covariance.unwrap_or_else(|| {
+            let mut c = [[0.0; 4]; 4];
+            c[2][2] = s.drift_var;
+            c
+        });
         let mut ids: Vec<u64> = s.polygons.iter().map(|p| p.id).collect();
         ids.sort_unstable();
         if let Some(w) = ids.windows(2).find(|w| w[0] == w[1]) {
@@ -65,7 +78,6 @@ impl PolygonMap {
                 moments,
                 uncertainty,
                 pixels: p.pixels,
-                horizontal: false,
                 erode: vec![0.0; p.boundary.len()],
                 erode_holes: p.holes.iter().map(|h| vec![0.0; h.len()]).collect(),
                 boundary: p.boundary.clone(),

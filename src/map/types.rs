@@ -81,6 +81,16 @@ pub struct MapSnapshot {
     pub drift_z: f64,
     /// Its variance, m^2.
     pub drift_var: f64,
+    /// The horizontal drift, m, and the yaw's, rad: the odometry puts a map point p at
+    /// R_z(drift_yaw) p + (drift_xy, drift_z).
+    #[serde(default)]
+    pub drift_xy: [f64; 2],
+    #[serde(default)]
+    pub drift_yaw: f64,
+    /// Covariance of the map frame's error (x, y, z, yaw at 1 m), m^2 (older snapshots:
+    /// none, the vertical variance alone).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drift_covariance: Option<[[f64; 4]; 4]>,
     #[serde(default)]
     pub stair: Option<Stair>,
     pub polygons: Vec<MapPolygon>,
@@ -94,8 +104,10 @@ pub struct MapUpdate {
     pub removed: Vec<u64>,
     /// Where each of the frame's polygons went: (its id in the frame, the map polygon's id).
     pub placed: Vec<(u32, u64)>,
-    /// The drift this frame measured (before filtering), m.
-    pub drift_measured: Option<f64>,
+    /// What the frame's planes said of the drift (None: nothing matched, or no filter).
+    pub registration: Option<super::Registration>,
+    /// A step of the odometry was taken into the drift before the frame was merged.
+    pub odometry_step: bool,
     /// What was refused, each with why.
     pub rejected: Vec<Rejection>,
 }
@@ -110,4 +122,8 @@ pub struct MapCounters {
     pub added: u64,
     pub removed: u64,
     pub cleared: u64,
+    /// Steps of the odometry taken into the drift.
+    pub odometry_steps: u64,
+    /// Registration rows dropped as wrong matches.
+    pub registration_outliers: u64,
 }

@@ -39,6 +39,10 @@ pub struct MockVinsOptions {
     pub propagate_hz: f64,
     /// Vertical drift added to the published poses, mm per second.
     pub drift_mm_per_s: f64,
+    /// Horizontal drift, mm per second in x and y, and yaw drift about the world's origin,
+    /// degrees per second, as a visual-inertial odometry drifts.
+    pub drift_xy_mm_per_s: [f64; 2],
+    pub drift_yaw_deg_per_s: f64,
     /// Stop after this long (None: run until stopped).
     pub duration: Option<Duration>,
 }
@@ -61,6 +65,8 @@ impl MockVinsOptions {
         jitter_ms: 10.0,
         propagate_hz: 200.0,
         drift_mm_per_s: 0.0,
+        drift_xy_mm_per_s: [0.0; 2],
+        drift_yaw_deg_per_s: 0.0,
         duration: None,
     };
 
@@ -80,6 +86,12 @@ impl MockVinsOptions {
         }
         if !(self.drift_mm_per_s.is_finite() && self.drift_mm_per_s.abs() <= 1e3) {
             return Some(format!("--drift {} must be within -1000..=1000 mm/s", self.drift_mm_per_s));
+        }
+        if !self.drift_xy_mm_per_s.iter().all(|v| v.is_finite() && v.abs() <= 1e3) {
+            return Some(format!("--drift-xy {:?} must be within -1000..=1000 mm/s", self.drift_xy_mm_per_s));
+        }
+        if !(self.drift_yaw_deg_per_s.is_finite() && self.drift_yaw_deg_per_s.abs() <= 10.0) {
+            return Some(format!("--drift-yaw {} must be within -10..=10 deg/s", self.drift_yaw_deg_per_s));
         }
         None
     }
@@ -134,9 +146,11 @@ pub async fn run(seq: &Sequence, config: &Config, opts: MockVinsOptions) -> Resu
     let pose_at = |stamp: StampNs| -> Result<RawPose> {
         let tau = clock.sequence_time(stamp).min(last_ns);
         let pose: Isometry3<f64> = poses.lookup(tau).map_err(|e| anyhow!("sequence pose at {tau}: {e}"))?;
-        let mut raw = RawPose::from(&crate::types::Pose { stamp_ns: stamp, transform: pose });
-        raw.position[2] += opts.drift_mm_per_s * 1e-3 * stamp.saturating_sub(started) as f64 * 1e-9;
-        Ok(raw)
+        let t = stamp.saturating_sub(started) as f64 * 1e-9;
+        let [x, y] = opts.drift_xy_mm_per_s.map(|v| v * 1e-3 * t);
+        let drift = nalgebra::Translation3::new(x, y, opts.drift_mm_per_s * 1e-3 * t)
+            * nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, (opts.drift_yaw_deg_per_s * t).to_radians());
+        Ok(RawPose::from(&crate::types::Pose { stamp_ns: stamp, transform: drift * pose }))
     };
     let (odometry, pose_stamped, pose_at) = (&odometry, &pose_stamped, &pose_at);
     let optimised = publish_timed(PoseTiming::new(&opts, started), started, opts.duration, |stamp| async move {

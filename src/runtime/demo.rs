@@ -19,7 +19,7 @@ pub const ROUTER_PORT: u16 = 7447;
 
 /// Runs for `duration`; the map is saved where `config.map.snapshot_path` says.
 pub async fn demo(config: &Config, duration: Duration, vins: MockVinsOptions) -> Result<Report> {
-    let opts = MockVinsOptions { drift_mm_per_s: 0.0, duration: None, ..vins };
+    let opts = MockVinsOptions { duration: None, ..vins };
     if let Some(p) = opts.problem() {
         anyhow::bail!("{}", p.replace("--", "--vins-"));
     }

@@ -82,7 +82,9 @@ impl Publishers {
             drift_var: e.drift_var,
         };
         self.map_updates.put(&convert::map_update(&delta, &self.map_frame)).await?;
-        self.tf.put(&convert::drift_transform(e.stamp_ns, &self.map_frame, &self.odometry_frame, e.drift_z)).await
+        self.tf
+            .put(&convert::drift_transform(e.stamp_ns, &self.map_frame, &self.odometry_frame, &e.map_from_odometry))
+            .await
     }
 
     /// The whole map and its markers, if the map changed since they last went.

@@ -46,6 +46,8 @@ pub struct FrameEvent {
     pub removed: Vec<u64>,
     pub drift_z: f64,
     pub drift_var: f64,
+    /// The odometry's frame seen from the map's: the drift taken out (what /tf carries).
+    pub map_from_odometry: Isometry3<f64>,
 }
 
 /// How the thread ended.
@@ -297,7 +299,8 @@ fn update_map(
     t_world_camera: &Isometry3<f64>,
 ) -> FrameEvent {
     let from_version = m.version();
-    let update = m.update(&frame.polygons.polygons, t_world_camera, &frame.intrinsics, Some(&frame.depth));
+    let pose = crate::types::Pose { stamp_ns: frame.polygons.stamp_ns, transform: *t_world_camera };
+    let update = m.update(&frame.polygons.polygons, &pose, &frame.intrinsics, Some(&frame.depth));
     let corrected = m.corrected(t_world_camera);
     let robot = m.corrected(world_body).translation.vector;
     let version = m.version();
@@ -316,7 +319,8 @@ fn update_map(
         changed: polygons_of(&update.changed),
         removed: update.removed,
         drift_z: m.drift.z,
-        drift_var: m.drift.var,
+        drift_var: m.drift.var(),
+        map_from_odometry: m.drift.transform().inverse(),
     }
 }
 

@@ -16,7 +16,7 @@ use rayon::prelude::*;
 pub use noise::NoiseModel;
 pub use scene::{Scene, SceneKind};
 
-use crate::sequence::{SequenceWriter, Truth};
+use crate::sequence::{HorizontalDrift, PoseJump, SequenceWriter, Truth};
 use crate::types::{Intrinsics, Pose};
 
 /// A noise-free render of a scene from one camera pose.
@@ -82,6 +82,8 @@ pub fn render(scene: &Scene, intrinsics: &Intrinsics, t_world_camera: &Isometry3
 #[derive(Clone, Debug)]
 pub struct SynthOptions {
     pub scene: SceneKind,
+    /// Up the flight of steps or down it.
+    pub walk: path::Direction,
     /// Image width; height is 3/4 of it, intrinsics the L515's scaled.
     pub width: u32,
     pub frames: usize,
@@ -89,6 +91,12 @@ pub struct SynthOptions {
     pub noise_mm: f64,
     /// Vertical drift added to the written poses, mm per frame (the truth stays true).
     pub drift_mm_per_frame: f64,
+    /// Horizontal drift, mm per frame, and yaw drift about the walk's start, degrees per frame.
+    pub drift_xy_mm_per_frame: [f64; 2],
+    pub drift_yaw_deg_per_frame: f64,
+    /// A step of the odometry from a frame on (VINS-Fusion's loop closure): frame, x, y, z
+    /// (mm) and yaw (degrees).
+    pub jump: Option<JumpOptions>,
     pub seed: u64,
     /// Frame rate of the stamps, Hz.
     pub fps: f64,
@@ -98,10 +106,14 @@ impl Default for SynthOptions {
     fn default() -> Self {
         SynthOptions {
             scene: SceneKind::Straight,
+            walk: path::Direction::Up,
             width: 320,
             frames: 30,
             noise_mm: 2.0,
             drift_mm_per_frame: 0.0,
+            drift_xy_mm_per_frame: [0.0; 2],
+            drift_yaw_deg_per_frame: 0.0,
+            jump: None,
             seed: 1,
             fps: 30.0,
         }
@@ -127,10 +139,51 @@ impl SynthOptions {
         if !(self.drift_mm_per_frame.is_finite() && self.drift_mm_per_frame.abs() <= 100.0) {
             return Some(format!("--drift {} must be within -100..=100 mm per frame", self.drift_mm_per_frame));
         }
+        for (name, v, max) in [
+            ("--drift-xy", self.drift_xy_mm_per_frame[0], 100.0),
+            ("--drift-xy", self.drift_xy_mm_per_frame[1], 100.0),
+            ("--drift-yaw", self.drift_yaw_deg_per_frame, 10.0),
+        ] {
+            if !(v.is_finite() && v.abs() <= max) {
+                return Some(format!("{name} {v} must be within -{max}..={max} per frame"));
+            }
+        }
+        if let Some(j) = self.jump {
+            let ok = j.xyz_mm.iter().all(|v| v.is_finite() && v.abs() <= 1000.0)
+                && j.yaw_deg.is_finite()
+                && j.yaw_deg.abs() <= 45.0;
+            if !ok || j.frame >= self.frames {
+                return Some(format!(
+                    "--jump {} {:?} {}: the frame must be one of the walk's, the step within 1000 mm and 45 degrees",
+                    j.frame, j.xyz_mm, j.yaw_deg
+                ));
+            }
+        }
         if !(self.fps >= 0.1 && self.fps <= 1000.0) {
             return Some(format!("--fps {} must be within 0.1..=1000", self.fps));
         }
         None
+    }
+}
+
+/// A step of the written poses from `frame` on.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct JumpOptions {
+    pub frame: usize,
+    pub xyz_mm: [f64; 3],
+    pub yaw_deg: f64,
+}
+
+impl SynthOptions {
+    /// The horizontal drift the options inject (None: none).
+    fn horizontal_drift(&self, start: &Isometry3<f64>) -> Option<HorizontalDrift> {
+        let none = self.drift_xy_mm_per_frame == [0.0; 2] && self.drift_yaw_deg_per_frame == 0.0 && self.jump.is_none();
+        (!none).then(|| HorizontalDrift {
+            xy_per_frame: self.drift_xy_mm_per_frame.map(|v| v / 1000.0),
+            yaw_deg_per_frame: self.drift_yaw_deg_per_frame,
+            pivot: [start.translation.x, start.translation.y],
+            jump: self.jump.map(|j| PoseJump { frame: j.frame, xyz: j.xyz_mm.map(|v| v / 1000.0), yaw_deg: j.yaw_deg }),
+        })
     }
 }
 
@@ -156,14 +209,18 @@ pub fn generate(opts: &SynthOptions, out: &Path, mut on_frame: impl FnMut(usize,
     let intrinsics = opts.intrinsics();
     let model = NoiseModel::l515(opts.noise_mm);
     let mut writer = SequenceWriter::create(out, intrinsics, true)?;
-    for (k, t_world_camera) in path::trajectory(&scene, opts.frames).into_iter().enumerate() {
+    let poses = path::walk(&scene, opts.frames, opts.walk);
+    let truth = Truth {
+        pose_drift_per_frame: opts.drift_mm_per_frame / 1000.0,
+        pose_drift: opts.horizontal_drift(&poses[0]),
+        ..scene.truth()
+    };
+    for (k, t_world_camera) in poses.into_iter().enumerate() {
         let r = render(&scene, &intrinsics, &t_world_camera);
         let depth = noisy_depth(&r, &model, opts.seed, k);
-        let mut written = t_world_camera;
-        written.translation.vector.z += opts.drift_mm_per_frame * k as f64 / 1000.0;
+        let written = truth.drift_at(k) * t_world_camera;
         writer.push(&depth, Pose { stamp_ns: stamp_ns(k, opts.fps), transform: written }, Some(&r.labels))?;
         on_frame(k, &r);
     }
-    let truth = Truth { pose_drift_per_frame: opts.drift_mm_per_frame / 1000.0, ..scene.truth() };
     writer.finish(Some(&truth))
 }

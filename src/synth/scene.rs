@@ -122,6 +122,7 @@ impl Scene {
                 })
                 .collect(),
             pose_drift_per_frame: 0.0,
+            pose_drift: None,
         }
     }
 
