@@ -674,6 +674,25 @@ fn a_wrong_match_does_not_move_the_map() {
 }
 
 #[test]
+fn a_step_within_the_merge_tolerance_is_registered_away_as_drift() {
+    let (start, intr) = camera();
+    let mut map = PolygonMap::new(&MapConfig::default());
+    for k in 0..30u64 {
+        // Walking 1 cm a frame; from frame 15 the odometry is 3 cm off in x: too small to be
+        // taken as a step, within the merge tolerance.
+        let pose = Translation3::new(0.01 * k as f64, 0.0, 0.0) * start;
+        let odometry = if k >= 15 { Translation3::new(0.03, 0.0, 0.0) * pose } else { pose };
+        map.update(&corner(&pose), &Pose { stamp_ns: k * 33_333_333, transform: odometry }, &intr, None);
+    }
+    assert_eq!(map.counters.odometry_steps, 0);
+    assert!((map.drift.x - 0.03).abs() < 2e-3, "drift x {}", map.drift.x);
+    let snap = map.snapshot();
+    assert_eq!(snap.polygons.len(), 4, "nothing smeared into a second copy");
+    let riser = snap.polygons.iter().find(|p| p.normal[0].abs() > 0.9).unwrap();
+    assert!((riser.centroid[0] - 0.5).abs() < 3e-3, "{:?}", riser.centroid);
+}
+
+#[test]
 fn a_step_of_the_odometry_is_taken_into_the_drift_not_the_map() {
     let (start, intr) = camera();
     let mut map = PolygonMap::new(&MapConfig::default());

@@ -197,7 +197,10 @@ impl DriftFilter {
         }
         let pd = nalgebra::DMatrix::from_iterator(4, 4, p.iter().copied());
         let innovation = &h * &pd * h.transpose() + r;
-        let Some(inv) = innovation.try_inverse() else { return };
+        let Some(inv) = innovation.try_inverse() else {
+            self.observed = 0;
+            return;
+        };
         let gain = &pd * h.transpose() * inv;
         let error = &gain * z;
         let post = (nalgebra::DMatrix::<f64>::identity(4, 4) - &gain * &h) * &pd;

@@ -132,7 +132,9 @@ impl PolygonMap {
         // Rows far off what the filter predicts, then off what the rest say, are wrong matches.
         let prior = Matrix4::from(self.drift.cov);
         let floor = self.cfg.drift_sigma_m;
-        rows.retain(|r| r.y * r.y <= OUTLIER_SIGMAS.powi(2) * (r.h.dot(&(prior * r.h)) + r.var + floor));
+        // A step of the odometry too small to be taken in as one is still within 4 sigma.
+        let step = (self.cfg.jump_min_m / OUTLIER_SIGMAS).powi(2);
+        rows.retain(|r| r.y * r.y <= OUTLIER_SIGMAS.powi(2) * (r.h.dot(&(prior * r.h)) + r.var + floor).max(step));
         let mut solution = drift::solve(&rows);
         for _ in 0..2 {
             let before = rows.len();

@@ -152,9 +152,10 @@ impl SynthOptions {
             let ok = j.xyz_mm.iter().all(|v| v.is_finite() && v.abs() <= 1000.0)
                 && j.yaw_deg.is_finite()
                 && j.yaw_deg.abs() <= 45.0;
-            if !ok || j.frame >= self.frames {
+            // Two frames before it set the datum and the motion it is told from.
+            if !ok || j.frame < 2 || j.frame >= self.frames {
                 return Some(format!(
-                    "--jump {} {:?} {}: the frame must be one of the walk's, the step within 1000 mm and 45 degrees",
+                    "--jump {} {:?} {}: the frame must be one of the walk's from its third, the step within 1000 mm and 45 degrees",
                     j.frame, j.xyz_mm, j.yaw_deg
                 ));
             }
