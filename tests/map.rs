@@ -524,7 +524,7 @@ fn a_snapshot_keeps_the_plane_covariance_and_weight_so_a_reloaded_map_fuses_on_a
 
 #[test]
 fn drift_filter_follows_the_papers_equations_when_only_heights_are_measured() {
-    let noise = DriftNoise { horizontal: false, ..MapConfig::default().drift_noise() };
+    let noise = DriftNoise { horizontal: false, ..DriftNoise::from(&MapConfig::default()) };
     let mut f = DriftFilter::new(noise);
     f.predict(&Vector3::zeros());
     assert_eq!(f.var(), 4e-6);
@@ -566,7 +566,7 @@ fn planes_measure_the_directions_their_normals_span_and_no_other() {
     let stair = drift::solve(&[floor, riser, heading, plane(Vector3::new(1.3, -0.2, 0.22), Vector3::x())]);
     assert_eq!(stair.directions.len(), 3);
     assert!(stair.directions.iter().all(|(u, _, _)| u.y.abs() < 1e-9), "y is not observed: {:?}", stair.directions);
-    let mut f = DriftFilter::new(MapConfig::default().drift_noise());
+    let mut f = DriftFilter::new(DriftNoise::from(&MapConfig::default()));
     f.predict(&Vector3::new(0.0, 0.0, 1.0));
     f.correct(&stair);
     assert_eq!(f.observed, drift::X | drift::Z | drift::YAW);

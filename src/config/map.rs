@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 
 use super::{Invalid, check_range};
-use crate::map::drift::DriftNoise;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -83,18 +82,6 @@ impl Default for MapConfig {
 }
 
 impl MapConfig {
-    /// The drift filter's noises.
-    pub fn drift_noise(&self) -> DriftNoise {
-        DriftNoise {
-            p_z: self.drift_sigma_p,
-            p_xy: self.drift_sigma_p_xy,
-            p_yaw: self.drift_sigma_p_yaw,
-            m: self.drift_sigma_m,
-            m_yaw: self.drift_sigma_m_yaw,
-            horizontal: self.drift_horizontal,
-        }
-    }
-
     pub(super) fn validate(&self) -> Result<(), Invalid> {
         let m = self;
         check_range("map.merge_height_tolerance_m", m.merge_height_tolerance_m, 1e-4, 1.0)?;

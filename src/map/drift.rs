@@ -41,6 +41,19 @@ pub struct DriftNoise {
     pub horizontal: bool,
 }
 
+impl From<&crate::config::MapConfig> for DriftNoise {
+    fn from(c: &crate::config::MapConfig) -> DriftNoise {
+        DriftNoise {
+            p_z: c.drift_sigma_p,
+            p_xy: c.drift_sigma_p_xy,
+            p_yaw: c.drift_sigma_p_yaw,
+            m: c.drift_sigma_m,
+            m_yaw: c.drift_sigma_m_yaw,
+            horizontal: c.drift_horizontal,
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DriftFilter {
     /// The drift's shift, m, and turn about z, rad (see the module's header).

@@ -44,7 +44,7 @@ use crate::extract::uncertainty::{Footing, PlaneUncertainty, footing, in_plane_a
 use crate::extract::{Grid, Polygon, VertexKind};
 use crate::types::{Intrinsics, Pose};
 use clearing::*;
-use drift::DriftFilter;
+use drift::{DriftFilter, DriftNoise};
 use fusion::*;
 use geometry::{Moments, Plane, PlaneFrame, ViewPyramid};
 pub use labels::{Label, Stair};
@@ -167,7 +167,7 @@ impl PolygonMap {
             index: RTree::new(),
             label_table: labels::Table::new(cfg.horizontal_max_tilt_deg, cfg.vertical_min_tilt_deg),
             next_id: 1,
-            drift: DriftFilter::new(cfg.drift_noise()),
+            drift: DriftFilter::new(DriftNoise::from(cfg)),
             track: register::Track::default(),
             version: 0,
             stair: None,
