@@ -789,8 +789,11 @@ fn depth_from_a_ros_topic_gives_the_sequence_s_polygons_frame_by_frame() {
     let dir = tempfile::tempdir().unwrap();
     let seq_dir = root().join("mock_frames/straight_320");
     let seq = polymap::sequence::Sequence::open(&seq_dir).unwrap();
+    // The offline twin rebuilds each frame's map frame from its update's drift_z alone, so
+    // the drift is vertical here (MapUpdate carries no x, y or yaw yet).
     let sources = format!(
-        "[sources.depth]\nkind = \"ros\"\nimage_unit_m = {}\n[sources.d435i]\nkind = \"none\"\n",
+        "[sources.depth]\nkind = \"ros\"\nimage_unit_m = {}\n[sources.d435i]\nkind = \"none\"\n\
+         [map]\ndrift_horizontal = false\n",
         seq.intrinsics.depth_scale
     );
     let (mut polymap, log) = registered_mapper(&core, dir.path(), &sources);

@@ -246,8 +246,10 @@ fn depth_from_a_ros_2_topic_gives_the_sequence_s_polygons_frame_by_frame() {
     std::fs::write(
         &config,
         format!(
+            // The offline twin rebuilds each frame's map frame from its update's drift_z alone
+            // (MapUpdate carries no x, y or yaw yet): the drift is vertical here.
             "[sources.depth]\nkind = \"ros\"\nimage_unit_m = {}\n[sources.d435i]\nkind = \"none\"\n\
-             [pipeline]\nbackend = \"cpu\"\n[zenoh]\nconfig_file = {:?}\n",
+             [pipeline]\nbackend = \"cpu\"\n[map]\ndrift_horizontal = false\n[zenoh]\nconfig_file = {:?}\n",
             seq.intrinsics.depth_scale,
             zenoh.display().to_string(),
         ),
