@@ -7,19 +7,27 @@ use crate::config::Config;
 use crate::interface::convert;
 use crate::map::{MapSnapshot, PolygonMap};
 use crate::pose::{PoseBuffer, PoseLimits};
+use crate::ros1::Ros1Message;
+use crate::ros1::tcpros::ConnectionHeader;
+use crate::ros1::xmlrpc;
 use crate::ros2::cdr;
-use crate::ros2::msg::{GetFootholdRequest, GetMapRequest, Odometry, PoseStamped};
+use crate::ros2::msg::{CameraInfo, GetFootholdRequest, GetMapRequest, Image, Odometry, PoseStamped};
 
 /// A fuzz target: takes any bytes, must never panic.
 pub type Target = fn(&[u8]);
 
 /// The targets, by name (the folder names under `fuzz/corpus/`).
-pub const TARGETS: [(&str, Target); 5] = [
+pub const TARGETS: [(&str, Target); 10] = [
     ("odometry", odometry),
     ("service_request", service_request),
     ("config", config),
     ("sequence", sequence),
     ("snapshot", snapshot),
+    ("tcpros_header", tcpros_header),
+    ("ros1_message", ros1_message),
+    ("xmlrpc", xmlrpc),
+    ("bag", bag),
+    ("mcap", mcap),
 ];
 
 /// A message on the odometry topic, as Odometry and as PoseStamped, into a pose buffer with
@@ -86,6 +94,64 @@ pub const SEQUENCE_SEPARATOR: &[u8] = b"\n\xff--polymap--\xff\n";
 pub fn snapshot(data: &[u8]) {
     if let Ok(s) = serde_json::from_slice::<MapSnapshot>(data) {
         let _ = PolygonMap::from_snapshot(&Default::default(), &s);
+    }
+}
+
+/// A TCPROS connection header, as a subscriber, publisher or service client sends it.
+pub fn tcpros_header(data: &[u8]) {
+    if let Ok(header) = ConnectionHeader::decode(data) {
+        let _ = header.require("md5sum");
+    }
+}
+
+/// A ROS 1 message body of each type polymap takes from a peer; a depth image with the
+/// camera_info read from the same bytes, as the depth topic turns them into a frame.
+pub fn ros1_message(data: &[u8]) {
+    let _ = Odometry::from_ros1(data);
+    let _ = PoseStamped::from_ros1(data);
+    let _ = GetMapRequest::from_ros1(data);
+    let _ = GetFootholdRequest::from_ros1(data);
+    let info = CameraInfo::from_ros1(data);
+    if let Ok(image) = Image::from_ros1(data) {
+        let info = info.unwrap_or_else(|_| CameraInfo {
+            width: image.width,
+            height: image.height,
+            k: [300.0, 0.0, image.width as f64 / 2.0, 0.0, 300.0, image.height as f64 / 2.0, 0.0, 0.0, 1.0],
+            ..Default::default()
+        });
+        let _ = convert::depth_frame(&image, &info, None);
+    }
+}
+
+/// An XML-RPC request or response body, as the master and other nodes send them, and a
+/// URI from one.
+pub fn xmlrpc(data: &[u8]) {
+    let _ = xmlrpc::parse_call(data);
+    if let Ok(value) = xmlrpc::parse_response(data)
+        && let Some(uri) = value.as_array().and_then(|v| v.get(2)).and_then(|v| v.as_str())
+    {
+        let _ = xmlrpc::host_port(uri);
+    }
+}
+
+/// A ROS 1 bag file, scanned as `polymap replay` scans a log first.
+pub fn bag(data: &[u8]) {
+    log_file(data, "fuzz.bag");
+}
+
+/// An MCAP file (a ROS 2 bag), scanned as `polymap replay` scans a log first.
+pub fn mcap(data: &[u8]) {
+    log_file(data, "fuzz.mcap");
+}
+
+fn log_file(data: &[u8], name: &str) {
+    let Ok(dir) = tempfile::tempdir() else { return };
+    let path = dir.path().join(name);
+    if std::fs::write(&path, data).is_err() {
+        return;
+    }
+    if let Ok(Some(log)) = crate::logs::Log::find(&path) {
+        let _ = crate::logs::scan(&log, "/odometry");
     }
 }
 

@@ -117,6 +117,85 @@ fn snapshots() {
 }
 
 #[test]
+fn tcpros_headers() {
+    fuzz("tcpros_header", 20_000);
+}
+
+#[test]
+fn ros1_messages() {
+    fuzz("ros1_message", 5_000);
+}
+
+#[test]
+fn xmlrpc_bodies() {
+    fuzz("xmlrpc", 5_000);
+}
+
+#[test]
+fn ros1_bags() {
+    fuzz("bag", 400);
+}
+
+#[test]
+fn mcap_files() {
+    fuzz("mcap", 400);
+}
+
+/// The seeds of the ROS 1 and log targets (fuzz/make_seeds.py, with rosbags) are what
+/// polymap reads whole, so the mutations start from inputs that reach past the first check.
+#[test]
+fn the_ros_1_and_log_seeds_are_read_whole() {
+    use polymap::ros1::Ros1Message;
+    use polymap::ros2::msg::{CameraInfo, Image, Odometry, PoseStamped};
+    let seed = |target: &str, name: &str| {
+        std::fs::read(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus").join(target).join(format!("seed-{name}")),
+        )
+        .unwrap()
+    };
+    let header = polymap::ros1::tcpros::ConnectionHeader::decode(&seed("tcpros_header", "subscriber")).unwrap();
+    assert_eq!(header.get("topic"), Some("/polygon_new_markers"));
+    let odometry = Odometry::from_ros1(&seed("ros1_message", "odometry")).unwrap();
+    assert_eq!((odometry.child_frame_id.as_str(), odometry.pose.pose.position.z), ("body", 0.9));
+    assert_eq!(PoseStamped::from_ros1(&seed("ros1_message", "pose_stamped")).unwrap().pose.position.y, 2.0);
+    let (image, info) = (
+        Image::from_ros1(&seed("ros1_message", "image")).unwrap(),
+        CameraInfo::from_ros1(&seed("ros1_message", "camera_info")).unwrap(),
+    );
+    let (frame, _) = polymap::interface::convert::depth_frame(&image, &info, None).unwrap();
+    assert_eq!((frame.width, frame.height, frame.pixels[1]), (8, 6, 907));
+    let (method, params) = polymap::ros1::xmlrpc::parse_call(&seed("xmlrpc", "call")).unwrap();
+    assert_eq!((method.as_str(), params.len()), ("publisherUpdate", 3));
+    assert!(polymap::ros1::xmlrpc::parse_response(&seed("xmlrpc", "response")).is_ok());
+    for (target, name) in [("bag", "seed.bag"), ("mcap", "seed.mcap")] {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(name);
+        std::fs::write(&path, seed(target, "four-topics")).unwrap();
+        let log = polymap::logs::Log::find(&path).unwrap().unwrap();
+        let scan = polymap::logs::scan(&log, "/odometry").unwrap();
+        assert_eq!(
+            (scan.topics.len(), scan.poses.len(), scan.poses_refused),
+            (4, 1, 0),
+            "{target}: {}",
+            scan.listing()
+        );
+    }
+    // The fuzzer's find: a record inside an uncompressed chunk longer than the chunk made the
+    // mcap crate's reader panic; polymap names it instead.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("past.mcap");
+    std::fs::write(
+        &path,
+        std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus/mcap/found-record-past-its-chunk"))
+            .unwrap(),
+    )
+    .unwrap();
+    let log = polymap::logs::Log::find(&path).unwrap().unwrap();
+    let Err(err) = polymap::logs::scan(&log, "/odometry") else { panic!("a malformed chunk read") };
+    assert!(format!("{err:#}").contains("longer than the chunk holding it"), "{err:#}");
+}
+
+#[test]
 fn every_target_has_a_corpus_and_a_cargo_fuzz_target() {
     for (name, _) in polymap::fuzz::TARGETS {
         corpus(name);

@@ -57,6 +57,18 @@ impl McapReader {
 
     /// The next message, in the order the files store them; None at the end.
     pub fn next_message(&mut self) -> Result<Option<Message>, McapFileError> {
+        // The mcap crate (0.24 to 0.26) subtracts a record's length inside an uncompressed
+        // chunk from what the chunk has left unchecked: a record longer than its chunk
+        // panics (overflow checks are on for it, release too, so it never wraps on).
+        let path = self.current.as_ref().map(|(path, ..)| path.clone()).unwrap_or_default();
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.read_next())).unwrap_or_else(|_| {
+            self.current = None;
+            self.files.clear();
+            Err(McapFileError::Format { path, why: "a record longer than the chunk holding it".into() })
+        })
+    }
+
+    fn read_next(&mut self) -> Result<Option<Message>, McapFileError> {
         loop {
             let Some((path, file, reader)) = &mut self.current else { return Ok(None) };
             let format = |why: String| McapFileError::Format { path: path.clone(), why };
