@@ -20,14 +20,16 @@ need_debs ros-core python3-rospy python3-rostopic python3-rosservice python3-ros
     python3-std-msgs python3-geometry-msgs python3-nav-msgs python3-sensor-msgs python3-visualization-msgs \
     python3-tf2-msgs python3-rosbag catkin ros-message-generation ros-message-runtime cmake g++
 
-# The Python client test: eclipse-zenoh and rosbags from PyPI in a virtualenv of our own.
+# The Python peers: eclipse-zenoh and rosbags from PyPI in a virtualenv of our own, and
+# zenoh-ros2-sdk (robotis-git/zenoh_ros2_sdk), an rmw_zenoh client that shares no code with
+# polymap, as the independent ROS 2 node of tests/ros2_peer.rs.
 venv=target/pyenv
-if ! "$venv/bin/python" -c "import zenoh, rosbags" >/dev/null 2>&1; then
-    echo "making $venv (eclipse-zenoh, rosbags)"
+if ! "$venv/bin/python" -c "import zenoh, rosbags, zenoh_ros2_sdk" >/dev/null 2>&1; then
+    echo "making $venv (eclipse-zenoh, rosbags, zenoh-ros2-sdk)"
     # Debian's own python (python3-venv above), not whatever python3 is first on PATH.
     py=/usr/bin/python3; [ -x "$py" ] || py=python3
     "$py" -m venv "$venv"
-    "$venv/bin/pip" install -q --disable-pip-version-check eclipse-zenoh==1.10.2 rosbags==0.11.9
+    "$venv/bin/pip" install -q --disable-pip-version-check eclipse-zenoh==1.10.2 rosbags==0.11.9 zenoh-ros2-sdk==0.1.8
 fi
 export POLYMAP_PYTHON="$PWD/$venv/bin/python"
 
@@ -37,6 +39,9 @@ source scripts/librealsense.sh "$venv"
 # The Quick start's build, default features (no `realsense`), as `cargo run --release --
 # demo` makes it; in debug, which reuses the suite's dependencies.
 cargo build --locked --bin polymap
+# The cargo-fuzz targets (fuzz/, a member of this workspace): built, so they never fall out
+# of step with polymap::fuzz; cargo-fuzz runs them for long (docs/testing.md).
+cargo build --locked -p polymap-fuzz
 # The examples as programs: tests/readme_clients.rs runs the Rust planner client as the
 # README does (`cargo test --all-targets` builds examples only as test harnesses).
 cargo build --locked --examples --features realsense

@@ -82,41 +82,83 @@ fn level_tilts_are_each_published_level_polygon_s_angle_from_level() {
     }
 }
 
-/// The small-objects config on the real ABW range images with hand-made plane truth
-/// (../shared/real/abw, Hoover et al. 1996), every image: most faces are found whole, and the
-/// angles between touching faces come out as the truth's.
+/// Hoover et al.'s segmentation metric on every frame of the committed straight stairs, its
+/// truth the mock's own per-pixel faces (treads, risers, floor, sides): the faces big enough
+/// to stand on come out whole and at the truth's angles. The real ABW range images (which
+/// may not be shipped) are scored the same way by `scripts/abw.sh`.
 #[test]
-fn the_small_objects_config_segments_the_real_abw_blocks_into_their_faces() {
-    use polymap::config::Config;
-    use polymap::eval::segmentation::{FaceTruth, hoover, polygon_normals, polygon_regions, summarise};
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let small = Config::load(root.join("config/small-objects.toml")).unwrap().pipeline;
-    let stairs = PipelineConfig::default();
-    let (mut with_small, mut with_stairs) = (Vec::new(), Vec::new());
-    for n in 0..15 {
-        let dir = root.join(format!("../shared/real/abw/abw.test.{n}"));
-        let seq = Sequence::open(&dir).unwrap();
-        let truth = FaceTruth::open(&dir).unwrap();
-        let depth = seq.depth(0).unwrap();
-        for (config, scores) in [(&small, &mut with_small), (&stairs, &mut with_stairs)] {
-            let out = extract_cpu(&depth, &seq.intrinsics, config).unwrap().polygons;
-            let regions = polygon_regions(&out.polygons, &depth, &seq.intrinsics);
-            scores.push(hoover(&truth, &regions, &polygon_normals(&out.polygons), 0.8));
+fn every_frame_of_the_stairs_segments_into_its_faces_by_hoover_s_metric() {
+    use nalgebra::{Point3, Vector3};
+    use polymap::eval::segmentation::{FaceTruth, HooverScore, hoover, polygon_normals, polygon_regions, summarise};
+    let seq = Sequence::open("mock_frames/straight_320").unwrap();
+    let truth = seq.truth.as_ref().unwrap();
+    let mut scores: Vec<HooverScore> = Vec::new();
+    for k in 0..seq.len() {
+        let camera = seq.poses[k].transform;
+        let centre = Point3::from(camera.translation.vector);
+        // Each truth polygon's normal (Newell's, from its outline) facing this camera, in
+        // the camera's frame as the polygons' are; faces too small to stand on are left out.
+        let labels = seq.labels(k).unwrap();
+        let mut pixels = std::collections::BTreeMap::<u16, usize>::new();
+        for &l in labels.iter().filter(|&&l| l != 0) {
+            *pixels.entry(l).or_default() += 1;
         }
+        let least = min_visible_pixels(seq.intrinsics.pixel_count());
+        let faces_kept: Vec<u16> = pixels.iter().filter(|&(_, &n)| n >= least).map(|(&l, _)| l).collect();
+        // One face per plane: riser 1 and the front wall beside it are one surface, split
+        // in the truth by what they are, not by their geometry (Hoover's truth is planes).
+        let mut planes: Vec<(u32, Vector3<f64>, f64)> = Vec::new();
+        let mut face_of = std::collections::BTreeMap::new();
+        for &l in &faces_kept {
+            let outline = &truth.polygons[l as usize - 1].boundary;
+            let mut n = Vector3::zeros();
+            for (a, b) in outline.iter().zip(outline.iter().cycle().skip(1)) {
+                n += Vector3::new(
+                    (a[1] - b[1]) * (a[2] + b[2]),
+                    (a[2] - b[2]) * (a[0] + b[0]),
+                    (a[0] - b[0]) * (a[1] + b[1]),
+                );
+            }
+            let n = n.normalize();
+            let n = if n.dot(&(centre - Point3::from(outline[0]))) > 0.0 { n } else { -n };
+            let d = -n.dot(&Vector3::from(outline[0]));
+            let face = match planes.iter().find(|(_, m, e)| (m - n).norm() < 1e-9 && (e - d).abs() < 1e-9) {
+                Some(&(face, ..)) => face,
+                None => {
+                    planes.push((l as u32, n, d));
+                    l as u32
+                }
+            };
+            face_of.insert(l, face);
+        }
+        let normals = planes
+            .iter()
+            .map(|(face, n, _)| {
+                let n = camera.rotation.inverse() * n;
+                (*face, [n.x, n.y, n.z])
+            })
+            .collect();
+        let faces = labels.iter().map(|l| face_of.get(l).copied().unwrap_or(0)).collect();
+        let face_truth =
+            FaceTruth { width: seq.intrinsics.width as usize, height: seq.intrinsics.height as usize, faces, normals };
+        let depth = seq.depth(k).unwrap();
+        let out = extract_cpu(&depth, &seq.intrinsics, &PipelineConfig::default()).unwrap().polygons;
+        let regions = polygon_regions(&out.polygons, &depth, &seq.intrinsics);
+        scores.push(hoover(&face_truth, &regions, &polygon_normals(&out.polygons), 0.8));
     }
-    let small = summarise(&with_small, 0.8);
-    let stairs = summarise(&with_stairs, 0.8);
-    // 17.8 faces per image; measured 15.67 correct (88 %) and 0.8 noise regions with the
-    // small-objects config (the 1996 paper's four segmenters: 9.7-13.4 of 15.2 over all 30),
-    // 1.9 with the stairs defaults (only the table and the back board are big enough).
-    assert!((small.truth_faces - 17.8).abs() < 0.05, "{small:?}");
-    assert!(small.correct >= 15.6 && small.correct_min >= 8 && small.noise <= 1.2, "{small:?}");
-    assert!(stairs.correct <= 3.0, "{stairs:?}");
-    // Touching faces found correctly meet at the truth's angle: the median error is well
-    // under a degree (the mean carries image 0's face 18, whose truth points fit no plane).
-    let mut angles: Vec<f64> = with_small.iter().flat_map(|s| s.angle_errors.iter().map(|a| a.error_deg)).collect();
-    angles.sort_by(f64::total_cmp);
-    assert!(angles.len() >= 200 && angles[angles.len() / 2] < 0.5, "{:?}", &angles[angles.len() / 2..]);
+    let summary = summarise(&scores, 0.8);
+    eprintln!("{summary:?}");
+    // Measured: 7.57 of 8.07 faces correct a frame (94 %), 3 at the fewest (frame 0, which
+    // sees four), 0.3 noise regions, no region across two planes, 0.03 deg mean angle error
+    // and 1.1 deg at worst over 421 pairs of touching faces.
+    assert_eq!(summary.images, seq.len());
+    assert!(summary.correct >= 0.9 * summary.truth_faces && summary.correct_min >= 3, "{summary:?}");
+    assert!(summary.under == 0.0 && summary.noise <= 0.5, "{summary:?}");
+    for (k, s) in scores.iter().enumerate() {
+        assert!(s.missed <= 1, "frame {k}: {s:?}");
+    }
+    assert!(summary.angle_pairs >= 300, "{summary:?}");
+    assert!(summary.angle_error_mean_deg <= 0.1 && summary.angle_error_max_deg <= 1.5, "{summary:?}");
 }
 
 /// How deep a tread's visible part is, from the truth alone: about its going on frames

@@ -51,11 +51,32 @@ async fn pair(config: &Config, capacity: usize) -> Pair {
     let publisher = polymap::ros2::session::open(loopback(None, &[port])).await.unwrap();
     wait_for_peer(&publisher).await;
     wait_for_peer(&mapper).await;
-    // Give the subscription's declaration time to reach the publisher.
-    tokio::time::sleep(Duration::from_millis(300)).await;
     let hash = types::message_hash::<polymap::ros2::msg::Odometry>();
     let e = Endpoint { name: interface.odometry_name(), type_name: "nav_msgs/msg/Odometry", type_hash: &hash };
     let key = node.data_key(&e);
+    // Ready once the subscription's declaration (of the configured type) has reached the
+    // publisher's side.
+    let stamped_hash = types::message_hash::<polymap::ros2::msg::PoseStamped>();
+    let probe_key = match config.ros2.odometry_type {
+        OdometryType::PoseStamped => node.data_key(&Endpoint {
+            name: interface.odometry_name(),
+            type_name: "geometry_msgs/msg/PoseStamped",
+            type_hash: &stamped_hash,
+        }),
+        OdometryType::Odometry => key.clone(),
+    };
+    let probe = publisher.declare_publisher(probe_key).await.unwrap();
+    for _ in 0..6000 {
+        if probe.matching_status().await.unwrap().matching() {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    assert!(
+        probe.matching_status().await.unwrap().matching(),
+        "polymap's odometry subscription never reached the peer"
+    );
+    drop(probe);
     Pair { publisher, _mapper: (mapper, wires, subscription), buffer, key }
 }
 

@@ -1,4 +1,5 @@
-//! The README's client commands, run as the README gives them, against `polymap demo`: the
+//! The README's commands, run as the README gives them: the Quick start's demo, which leaves
+//! `out/map.json` and `out/map.png`; and the client commands against `polymap demo`: the
 //! demo in the background, then the Python client and the Rust planner client, which find it
 //! where they look by default (tcp/127.0.0.1:7447) and print the map.
 //!
@@ -58,8 +59,12 @@ impl Drop for Running {
     }
 }
 
+/// The demos of this file one at a time: each wants the README's port, 7447.
+static DEMO: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 #[test]
 fn the_readme_s_clients_reach_a_running_demo_and_print_the_map() {
+    let _one_demo = DEMO.lock().unwrap_or_else(|e| e.into_inner());
     assert!(
         std::net::TcpListener::bind("127.0.0.1:7447").is_ok(),
         "port 7447 is in use here: the README's clients look for the demo there"
@@ -109,4 +114,101 @@ fn the_readme_s_clients_reach_a_running_demo_and_print_the_map() {
     assert!(count >= 4, "{rust}");
     assert!(rust.lines().filter(|l| l.contains(" tread ")).count() >= 4, "{rust}");
     assert!(rust.contains("foothold: found true (contains true)"), "{rust}");
+}
+
+/// The Quick start's first command, as written, in a folder of its own (holding the bundled
+/// frames it replays): it ends with the map in `out/map.json` and its top-down picture, truth
+/// outlines in yellow, in `out/map.png`.
+#[test]
+fn the_quick_start_demo_leaves_the_map_and_its_picture_in_out() {
+    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let quick = &readme[readme.find("## Quick start").expect("a Quick start")..];
+    let block = &quick[quick.find("```sh\n").unwrap() + 6..];
+    let line = block.lines().next().unwrap().trim();
+    assert_eq!(line, "cargo run --release -- demo", "the Quick start's first command");
+    let _one_demo = DEMO.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    std::os::unix::fs::symlink(root().join("mock_frames"), dir.path().join("mock_frames")).unwrap();
+    let (mut demo, _) = command(line);
+    let out = demo.current_dir(dir.path()).output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{line}: {stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let map: polymap::map::MapSnapshot =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("out/map.json")).unwrap()).unwrap();
+    let treads = map.polygons.iter().filter(|p| p.label == polymap::map::Label::Tread).count();
+    assert!(treads >= 4, "{treads} treads in out/map.json: {stdout}");
+    let picture = image::open(dir.path().join("out/map.png")).unwrap().to_rgb8();
+    assert!(picture.width() >= 200 && picture.height() >= 200, "{}x{}", picture.width(), picture.height());
+    let yellow = picture.pixels().filter(|p| p[0] > 200 && p[1] > 200 && p[2] < 80).count();
+    assert!(yellow >= 200, "{yellow} yellow pixels: the truth's outlines are drawn");
+}
+
+/// The README's offline commands as a user runs them on the bundled stairs: `inspect` with
+/// its previews, `extract` of one frame, `eval` of every frame, `replay` with `--out` and
+/// `--render`, and `eval --map` of that map; and every command the README lists has a `--help`.
+#[test]
+fn the_readme_s_offline_commands_do_what_it_says() {
+    let dir = tempfile::tempdir().unwrap();
+    let seq = root().join("mock_frames/straight_320");
+    let run = |args: &[&std::ffi::OsStr]| -> String {
+        let out = Command::new(env!("CARGO_BIN_EXE_polymap")).args(args).output().unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(out.status.success(), "polymap {args:?}: {stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+        stdout
+    };
+    let at = |name: &str| dir.path().join(name);
+    let json = |path: &std::path::Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+    };
+    let (seq_arg, cpu) = (seq.as_os_str(), ["--backend".as_ref(), "cpu".as_ref()]);
+
+    let said = run(&["inspect".as_ref(), seq_arg, "--preview".as_ref(), at("preview").as_os_str()]);
+    assert!(said.contains("30 frames, 320x240") && said.contains("labels: yes"), "{said}");
+    assert_eq!(std::fs::read_dir(at("preview")).unwrap().count(), 30, "a preview a frame");
+
+    run(&[
+        &["extract".as_ref(), seq_arg, "--frame".as_ref(), "5".as_ref(), "--out".as_ref(), at("f5.json").as_os_str()],
+        &cpu[..],
+    ]
+    .concat());
+    let frame = json(&at("f5.json"));
+    assert_eq!(frame["frame"], "camera", "its polygons in the camera frame without --world");
+    assert!(frame["polygons"].as_array().unwrap().len() >= 4, "{frame}");
+
+    let eval: serde_json::Value =
+        serde_json::from_str(&run(&[&["eval".as_ref(), seq_arg, "--json".as_ref()], &cpu[..]].concat())).unwrap();
+    let summary = &eval["summary"];
+    assert_eq!(eval["treads"].as_array().unwrap().len() as u64, summary["treads_in_view"].as_u64().unwrap());
+    assert!(
+        summary["treads_in_view"].as_u64().unwrap() >= 50 && summary["iou_mean"].as_f64().unwrap() >= 0.9,
+        "{summary}"
+    );
+
+    let (map, picture) = (at("map.json"), at("map.png"));
+    run(&[
+        &["replay".as_ref(), seq_arg, "--out".as_ref(), map.as_os_str(), "--render".as_ref(), picture.as_os_str()],
+        &cpu[..],
+    ]
+    .concat());
+    let snapshot: polymap::map::MapSnapshot = serde_json::from_value(json(&map)).unwrap();
+    assert!(snapshot.polygons.iter().filter(|p| p.label == polymap::map::Label::Tread).count() >= 6);
+    let picture = image::open(&picture).unwrap().to_rgb8();
+    assert!(picture.pixels().filter(|p| p[0] > 200 && p[1] > 200 && p[2] < 80).count() >= 200, "truth outlines drawn");
+
+    let scored: serde_json::Value =
+        serde_json::from_str(&run(&["eval".as_ref(), seq_arg, "--map".as_ref(), map.as_os_str(), "--json".as_ref()]))
+            .unwrap();
+    let s = &scored["summary"];
+    assert!(s["iou_mean"].as_f64().unwrap() >= 0.98 && s["height_error_max_mm"].as_f64().unwrap() < 1.0, "{s}");
+
+    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let commands = &readme[readme.find("## Commands").unwrap()..];
+    let commands = &commands[..commands.find("\n## ").unwrap()];
+    let mut listed: Vec<&str> =
+        commands.lines().filter_map(|l| l.strip_prefix("polymap ")?.split_whitespace().next()).collect();
+    listed.dedup();
+    assert!(listed.len() >= 12, "{listed:?}");
+    for command in listed {
+        run(&[command.as_ref(), "--help".as_ref()]);
+    }
 }

@@ -7,6 +7,9 @@
 //! - An intruder with a certificate of the CA but no role may connect, and do nothing: its
 //!   odometry (poses 123 m up) never reaches anyone, its queryable on the
 //!   foothold service never sees a query, and the planner gets the mapper's answer only.
+//! - Known peers beyond their jobs do nothing either: a planner's odometry, its queryable on
+//!   polymap's service and its forged map updates, and VINS's forged map updates and its
+//!   subscription to them, reach no one.
 //! - VINS, polymap and the planner do their jobs through the router, which starts after
 //!   polymap: polymap waits for it.
 
@@ -185,12 +188,13 @@ async fn only_authenticated_authorised_peers_reach_polymap() {
     // intruder's phantom: z = 123 m).
     let (updates, real_poses, phantom_poses) =
         (Arc::new(AtomicU64::new(0)), Arc::new(AtomicU64::new(0)), Arc::new(AtomicU64::new(0)));
-    let u = updates.clone();
+    // A sample that does not decode as a MapUpdate is a peer's forgery (polymap's decode).
+    let forged_updates = Arc::new(AtomicU64::new(0));
+    let (u, f) = (updates.clone(), forged_updates.clone());
     let _updates = planner
         .subscribe(&interface.map_updates, move |m| {
-            if m.is_ok() {
-                u.fetch_add(1, Ordering::Relaxed);
-            }
+            let counter = if m.is_ok() { &u } else { &f };
+            counter.fetch_add(1, Ordering::Relaxed);
         })
         .await
         .unwrap();
@@ -228,6 +232,40 @@ async fn only_authenticated_authorised_peers_reach_polymap() {
         })
         .await
         .unwrap();
+    // Roles beyond their jobs, each with a certificate of the CA: a second planner that
+    // publishes odometry (poses 123 m up too), forges map updates and serves the foothold
+    // service; VINS that forges map updates and subscribes to them.
+    let update_key = planner.data_key(&Endpoint {
+        name: &interface.map_updates.name,
+        type_name: "polymap_msgs/msg/MapUpdate",
+        type_hash: &polymap::ros2::types::message_hash::<polymap::ros2::msg::MapUpdate>(),
+    });
+    let planner2_session = open(&shipped("planner", "planner", tls, port)).await.expect("a second planner connects");
+    let planner2 = Node::new(&planner2_session, node_options("planner2")).await.unwrap();
+    let planner_phantom = planner2.publisher(&odometry).await.unwrap();
+    let planner_asked = Arc::new(AtomicU64::new(0));
+    let a = planner_asked.clone();
+    let _planner_queryable = planner2_session
+        .declare_queryable(key.clone())
+        .complete(true)
+        .callback(move |_| {
+            a.fetch_add(1, Ordering::Relaxed);
+        })
+        .await
+        .unwrap();
+    let vins_session = open(&shipped("vins", "vins", tls, port)).await.expect("VINS connects");
+    let vins_heard = Arc::new(AtomicU64::new(0));
+    let h = vins_heard.clone();
+    let _vins_updates = vins_session
+        .declare_subscriber(update_key.clone())
+        // Its own forgeries reach it within its session; polymap's updates may not.
+        .callback(move |sample| {
+            if sample.payload().to_bytes()[..] != [0xde, 0xad, 0xbe, 0xef] {
+                h.fetch_add(1, Ordering::Relaxed);
+            }
+        })
+        .await
+        .unwrap();
     for k in 0..100 {
         let raw = RawPose {
             stamp_ns: polymap::clock::now_ns(),
@@ -235,6 +273,10 @@ async fn only_authenticated_authorised_peers_reach_polymap() {
             quat_xyzw: [0.0, 0.0, 0.0, 1.0],
         };
         phantom.put(&convert::odometry(&raw, "world", "body")).await.unwrap();
+        planner_phantom.put(&convert::odometry(&raw, "world", "body")).await.unwrap();
+        for session in [&planner2_session, &vins_session] {
+            session.put(update_key.clone(), vec![0xde, 0xad, 0xbe, 0xef]).await.unwrap();
+        }
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
 
@@ -273,11 +315,22 @@ async fn only_authenticated_authorised_peers_reach_polymap() {
     assert!(status.success(), "polymap ended with {status} on SIGTERM: {}", logs());
     assert!(updates.load(Ordering::Relaxed) >= 10, "the planner gets the map updates: {}", logs());
     assert!(real_poses.load(Ordering::Relaxed) >= 200, "the planner sees VINS's odometry");
-    assert_eq!(phantom_poses.load(Ordering::Relaxed), 0, "the intruder's odometry reached the planner");
+    assert_eq!(
+        phantom_poses.load(Ordering::Relaxed),
+        0,
+        "a phantom odometry (the intruder's or a planner's) reached the planner"
+    );
     // Had the phantom poses reached the mapper, its map would hold surfaces 123 m up.
     assert!(map.polygons.len() >= 5, "{} polygons", map.polygons.len());
     assert!(map.polygons.iter().all(|p| p.centroid.z < 2.0), "the intruder's odometry reached the mapper");
     assert_eq!(asked.load(Ordering::Relaxed), 0, "a query reached the intruder's queryable");
+    assert_eq!(planner_asked.load(Ordering::Relaxed), 0, "a query reached a planner's queryable");
+    assert_eq!(
+        forged_updates.load(Ordering::Relaxed),
+        0,
+        "a planner's or VINS's forged map update reached the planner"
+    );
+    assert_eq!(vins_heard.load(Ordering::Relaxed), 0, "VINS subscribed to polymap's map updates");
     assert_eq!(answers.len(), 1, "one answer, the mapper's: {answers:?}");
     assert!(answers[0].found && answers[0].polygon_id != 999_999, "{:?}", answers[0]);
 }

@@ -78,6 +78,9 @@ def run(peer, args):
         "streams": first,
         "imu_count": len(imu),
         "imu_rate_hz": (len(stamps) - 1) / (stamps[-1] - stamps[0]) if len(stamps) > 1 and stamps[-1] > stamps[0] else 0.0,
+        # The sensor's own period, from its stamps: a sample lost on the way leaves one gap.
+        "imu_median_interval_s": 1e-9 * sorted(b["stamp_ns"] - a["stamp_ns"] for a, b in zip(imu, imu[1:]))[len(imu) // 2 - 1]
+        if len(imu) > 2 else 0.0,
         "imu_mean_accel_norm": sum(sum(v * v for v in s["accel"]) ** 0.5 for s in imu) / max(len(imu), 1),
         # rmw_zenoh's attachment on every sample: sequence numbers counting up per publisher.
         "attachments_ok": {t: all(a is not None for a in atts) and all(
