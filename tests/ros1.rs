@@ -348,6 +348,14 @@ fn a_rospy_node_receives_every_topic_feeds_odometry_and_calls_the_services() {
     let (early, during) = (&v["status_early"], &v["status_during"]);
     assert!(during["processed"].as_u64().unwrap() >= early["processed"].as_u64().unwrap() + 10, "{early} -> {during}");
     assert_eq!(during["without_pose"], early["without_pose"], "no frame without a pose once odometry flowed");
+    // The odometry publisher's connection broken off from its side: polymap connects again
+    // while the master lists it, and its poses come in again.
+    let reconnect = &v["reconnect"];
+    assert!(reconnect["broken"].as_u64().unwrap() >= 1, "{reconnect}");
+    assert!(
+        reconnect["accepted_after"].as_u64().unwrap() >= reconnect["accepted_at_break"].as_u64().unwrap() + 20,
+        "poses taken after the publisher broke off: {reconnect}"
+    );
     let status = &v["status"];
     assert!(status["processed"].as_u64().unwrap() >= 20, "{status}");
     assert!(status["poses_accepted"].as_u64().unwrap() >= 50, "{status}");
@@ -687,7 +695,17 @@ fn the_readme_s_ros1_commands_work_as_written() {
         if line.ends_with('&') {
             let log = std::fs::File::create(home.path().join(format!("bg{}.log", background.0.len()))).unwrap();
             background.0.push(shell(line).stdout(log.try_clone().unwrap()).stderr(log).spawn().unwrap());
-            std::thread::sleep(Duration::from_secs(3));
+            // Ready when the master answers (roscore) or lists the node (the demo); the next
+            // commands wait for their topic or service themselves.
+            let node = if line.starts_with("roscore") { "/rosout" } else { "/polymap" };
+            let deadline = Instant::now() + Duration::from_secs(120);
+            while !shell("rosnode list")
+                .output()
+                .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).lines().any(|l| l.trim() == node))
+            {
+                assert!(Instant::now() < deadline, "{line}: {node} never came up");
+                std::thread::sleep(Duration::from_millis(300));
+            }
         } else {
             let out = shell(&format!("timeout 90 {line}")).output().unwrap();
             let logs: String = (0..background.0.len())
@@ -819,4 +837,105 @@ fn depth_from_a_ros_topic_gives_the_sequence_s_polygons_frame_by_frame() {
     assert!(log_text.contains("but its camera_info says"), "{log_text}");
     let status = status.unwrap();
     assert!(status.contains("frames_not_extracted: 2"), "{status}");
+}
+
+/// The mapper's sources for a burst of changes: the mock stairs at 30 Hz (more frames than
+/// the CPU twin extracts here: the newest frame wins), no D435i.
+fn burst_sources() -> String {
+    format!(
+        "[sources.depth]\nsequence = {:?}\nfps = 30\n",
+        root().join("mock_frames/straight_320").display().to_string()
+    )
+}
+
+/// A rospy follower, node `name` (tests/peer/ros1_follower.py); `drop_every` > 0 loses every
+/// n-th update it receives, as a lossy link would.
+fn rospy_follower(core: &Roscore, dir: &Path, name: &str, drop_every: u32) -> common::PeerFollower {
+    let mut cmd = Command::new(PYTHON);
+    cmd.arg(root().join("tests/peer/ros1_follower.py")).args(["--name", name, "--drop-every", &drop_every.to_string()]);
+    core.env(&mut cmd);
+    common::PeerFollower::spawn(cmd, name, dir)
+}
+
+/// The mock VINS on ROS 1 (`/vins_estimator/odometry`) for `seconds`, waited for: then no
+/// frame has a pose and the map stops changing.
+fn ros1_vins_for(core: &Roscore, seconds: u32) {
+    let mut vins = Command::new(env!("CARGO_BIN_EXE_polymap"));
+    vins.args(["mock-vins", "--ros1", "--duration", &seconds.to_string()])
+        .arg(root().join("mock_frames/straight_320"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null());
+    core.env(&mut vins);
+    let status = vins.status().unwrap();
+    assert!(status.success(), "mock-vins: {status}");
+}
+
+/// Planners on ROS 1 that share nothing with polymap (tests/peer/ros1_follower.py: rospy,
+/// genpy's polymap_msgs, the README's contract written out again) keep their own copy of the
+/// map from `map_updates` and the latched `map`, and each ends with get_map's map, polygon by
+/// polygon and field by field:
+/// - through a burst of changes (the camera at 30 Hz), one following every update and one
+///   losing every fourth (it notices the gaps and takes a whole map);
+/// - through a restart of polymap (SIGINT, a new run: a new epoch, the map built again from
+///   empty by a shorter walk): both drop the old map for the new one;
+/// - and one that joins once the map is built.
+#[test]
+fn rospy_followers_end_with_get_map_s_map_after_a_burst_a_restart_and_a_late_join() {
+    let core = Roscore::start();
+    let dir = tempfile::tempdir().unwrap();
+    let start = |run: &str| {
+        let run_dir = dir.path().join(run);
+        std::fs::create_dir_all(&run_dir).unwrap();
+        let polymap = mapper(&core, &run_dir, 900, &burst_sources(), free_loopback_port().unwrap());
+        wait_for_node(&core, "/polymap", &run_dir.join("mapper.log"));
+        polymap
+    };
+    let mut polymap = start("run1");
+    let mut follower = rospy_follower(&core, dir.path(), "follower", 0);
+    let mut lossy = rospy_follower(&core, dir.path(), "lossy_follower", 4);
+    let (joined, lossy_joined) = (follower.ready(), lossy.ready());
+    eprintln!("joined: {joined}\n        {lossy_joined}");
+
+    // A burst: 12 s of odometry with the camera at 30 Hz.
+    ros1_vins_for(&core, 12);
+    follower.check("burst");
+    lossy.check("burst");
+    let (a, a_lossy) = (follower.checked(), lossy.checked());
+    eprintln!("after the burst: {a}\n                 {a_lossy}");
+    common::assert_holds_the_map(&a, "the follower after the burst");
+    common::assert_holds_the_map(&a_lossy, "the lossy follower after the burst");
+    assert!(a["version"].as_u64().unwrap() >= 10 && a["map_polygons"].as_u64().unwrap() >= 3, "a burst: {a}");
+    assert!(a["counters"]["applied"].as_u64().unwrap() >= 1, "the follower followed by the updates: {a}");
+    assert!(a_lossy["counters"]["dropped"].as_u64().unwrap() >= 1, "{a_lossy}");
+    assert!(a_lossy["counters"]["gaps"].as_u64().unwrap() >= 1, "the lossy follower saw its gaps: {a_lossy}");
+
+    // A restart: a new run (a new epoch) builds the map again from empty, with a shorter walk
+    // (fewer versions than the first run's).
+    stop(&mut polymap);
+    let mut polymap = start("run2");
+    ros1_vins_for(&core, 6);
+    follower.check("restart");
+    lossy.check("restart");
+    let (b, b_lossy) = (follower.checked(), lossy.checked());
+    eprintln!("after the restart: {b}\n                   {b_lossy}");
+    for (check, who) in [(&b, "the follower"), (&b_lossy, "the lossy follower")] {
+        common::assert_holds_the_map(check, &format!("{who} after the restart"));
+        assert_ne!(check["epoch"], a["epoch"], "{who}: a new run: {check}");
+        assert_eq!(check["epochs"], serde_json::json!([a["epoch"], check["epoch"]]), "{who}: {check}");
+    }
+    assert!(b["map_polygons"].as_u64().unwrap() >= 3, "the new run mapped: {b}");
+
+    // A late joiner, once the map is built.
+    let mut late = rospy_follower(&core, dir.path(), "late_follower", 0);
+    let late_joined = late.ready();
+    late.check("late");
+    let c = late.checked();
+    eprintln!("the late joiner: {late_joined}\n                 {c}");
+    common::assert_holds_the_map(&c, "the late joiner");
+    assert_eq!((&c["epoch"], &c["version"]), (&b["epoch"], &b["version"]), "{c}");
+    assert!(c["topic_maps"].as_u64().unwrap() >= 1, "the whole map from the latched `map` topic: {c}");
+    for f in [&mut follower, &mut lossy, &mut late] {
+        f.quit();
+    }
+    stop(&mut polymap);
 }

@@ -196,6 +196,156 @@ fn a_ros_2_peer_on_rmw_zenoh_sees_polymap_s_topics_graph_and_services_and_feeds_
     assert_eq!((&v["tf_last"]["parent"], &v["tf_last"]["child"]), (&"map".into(), &"world".into()), "{}", v["tf_last"]);
 }
 
+/// An independent ROS 2 node: zenoh-ros2-sdk (ROBOTIS's rmw_zenoh client on PyPI, pinned in
+/// scripts/test.sh), through its public API only, on the message definitions of the packages
+/// that define them (polymap_msgs/ as it is; ROS 2 Jazzy's, grid_map's and
+/// convex_plane_decomposition's .msg files in tests/peer/ros2_interfaces/). Its type hashes are
+/// polymap's, so its keys meet polymap's: it receives every topic, the latched map though it
+/// joins late, finds polymap in the graph from its liveliness tokens, calls both services,
+/// and its odometry is what polymap maps with. tests/peer/ros2_sdk_peer.py says where it works
+/// around the SDK.
+#[test]
+fn an_independent_ros_2_client_zenoh_ros2_sdk_receives_polymap_s_topics_calls_its_services_and_feeds_it_odometry() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_loopback_port().unwrap();
+    let mut mapper = mapper(dir.path(), port, "", 60);
+    // No sleep: the SDK's session waits for polymap's port, and the peer for polymap's first status.
+    let out = Command::new(python())
+        .arg(root().join("tests/peer/ros2_sdk_peer.py"))
+        .args(["--connect", &format!("tcp/127.0.0.1:{port}"), "--seconds", "15", "--sequence"])
+        .arg(root().join("mock_frames/straight_320"))
+        .output()
+        .unwrap();
+    let _ = mapper.kill();
+    let _ = mapper.wait();
+    let log = std::fs::read_to_string(dir.path().join("mapper.log")).unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "peer failed: {stdout}\n{stderr}\n{log}");
+    eprint!("{stderr}");
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+
+    // The hashes the SDK computes from the definitions are polymap's.
+    use polymap::ros2::msg;
+    use polymap::ros2::msg::service_hash;
+    use polymap::ros2::types::message_hash;
+    let ours = [
+        ("polymap_msgs/msg/FramePolygons", message_hash::<msg::FramePolygons>()),
+        ("polymap_msgs/msg/MapUpdate", message_hash::<msg::MapUpdate>()),
+        ("polymap_msgs/msg/Status", message_hash::<msg::Status>()),
+        ("polymap_msgs/msg/Map", message_hash::<msg::Map>()),
+        ("tf2_msgs/msg/TFMessage", message_hash::<msg::TfMessage>()),
+        ("convex_plane_decomposition_msgs/msg/PlanarTerrain", message_hash::<msg::PlanarTerrain>()),
+        ("visualization_msgs/msg/MarkerArray", message_hash::<msg::MarkerArray>()),
+        ("sensor_msgs/msg/Image", message_hash::<msg::Image>()),
+        ("sensor_msgs/msg/CameraInfo", message_hash::<msg::CameraInfo>()),
+        ("sensor_msgs/msg/Imu", message_hash::<msg::Imu>()),
+        ("nav_msgs/msg/Odometry", message_hash::<msg::Odometry>()),
+        ("polymap_msgs/srv/GetMap", service_hash::<msg::GetMap>()),
+        ("polymap_msgs/srv/GetFoothold", service_hash::<msg::GetFoothold>()),
+    ];
+    for (ty, hash) in &ours {
+        assert_eq!(v["hashes"][ty], *hash, "{ty}: the SDK's hash, then polymap's");
+    }
+    let hash = |ty: &str| ours.iter().find(|(t, _)| *t == ty).unwrap().1.clone();
+
+    // Every topic arrives on the keys the SDK makes (status each second; map and markers at
+    // most each second, when the map changed; the IMU at 200 Hz; the rest each frame, 8 Hz when
+    // the machine is idle, fewer when it is loaded, or five times a second, the terrain).
+    for (topic, count) in v["counts"].as_object().unwrap() {
+        let least = if topic.ends_with("imu") {
+            500
+        } else if topic.ends_with("/map") {
+            2
+        } else if topic.ends_with("status") || topic.ends_with("markers") {
+            5
+        } else {
+            10
+        };
+        assert!(count.as_u64().unwrap() >= least, "{topic}: {count} samples");
+    }
+    // map_updates is keep-all: every update starts from the version the one before made.
+    assert_eq!(v["map_updates"]["breaks"], 0, "{}", v["map_updates"]);
+
+    // Joining /polymap/leju/map late, the SDK's transient-local subscriber gets the latched map
+    // from polymap's cache before its constructor returns.
+    let late = &v["late_map"];
+    assert!(late["at_join"].as_u64().unwrap() >= 1, "the latched map on joining late: {late}");
+    assert_eq!(late["first"]["frame_id"], "map", "{late}");
+    assert!(late["first"]["polygons"].as_u64().unwrap() > 0, "{late}");
+    assert!(v["counts"]["/polymap/leju/map"].as_u64().unwrap() > late["at_join"].as_u64().unwrap(), "and later maps");
+
+    // First samples, decoded from the definitions.
+    assert_eq!(
+        v["image_first"],
+        serde_json::json!({"width": 320, "height": 240, "encoding": "mono8", "bytes": 320 * 240})
+    );
+    assert_eq!((&v["camera_info_first"]["width"], &v["camera_info_first"]["height"]), (&320.into(), &240.into()));
+    assert_eq!(v["imu_first"]["angular_velocity_covariance"][0], 0.01);
+    assert_eq!(v["terrain_first"]["frame_id"], "map", "{}", v["terrain_first"]);
+    assert_eq!(v["terrain_first"]["layers"], serde_json::json!(["elevation", "smooth_planar", "region"]));
+    assert!(v["markers_last"]["markers"].as_u64().unwrap() > 0, "{}", v["markers_last"]);
+    assert_eq!((&v["tf_last"]["parent"], &v["tf_last"]["child"]), (&"map".into(), &"world".into()), "{}", v["tf_last"]);
+
+    // The graph as the SDK's discovery reads polymap's liveliness tokens: polymap's node in
+    // its namespace publishes each topic, subscribes to the odometry and serves both services,
+    // with the types and hashes above.
+    let graph = &v["graph"];
+    let polymap_has = |name: &str, side: &str, ty: &str| {
+        graph[name][side].as_array().is_some_and(|es| {
+            es.iter().any(|e| {
+                e["node"] == "polymap" && e["namespace"] == "/polymap/leju" && e["type"] == ty && e["hash"] == hash(ty)
+            })
+        })
+    };
+    for (name, ty) in [
+        ("/polymap/leju/frame_polygons", "polymap_msgs/msg/FramePolygons"),
+        ("/polymap/leju/map_updates", "polymap_msgs/msg/MapUpdate"),
+        ("/polymap/leju/markers", "visualization_msgs/msg/MarkerArray"),
+        ("/polymap/leju/status", "polymap_msgs/msg/Status"),
+        ("/polymap/leju/map", "polymap_msgs/msg/Map"),
+        ("/tf", "tf2_msgs/msg/TFMessage"),
+        ("/convex_plane_decomposition_ros/planar_terrain", "convex_plane_decomposition_msgs/msg/PlanarTerrain"),
+        ("/camera/camera/infra1/image_rect_raw", "sensor_msgs/msg/Image"),
+        ("/camera/camera/infra1/camera_info", "sensor_msgs/msg/CameraInfo"),
+        ("/camera/camera/imu", "sensor_msgs/msg/Imu"),
+    ] {
+        assert!(polymap_has(name, "publishers", ty), "polymap publishing {name}: {}", graph[name]);
+    }
+    assert!(polymap_has("/odometry", "subscribers", "nav_msgs/msg/Odometry"), "{}", graph["/odometry"]);
+    for (name, ty) in [
+        ("/polymap/leju/get_map", "polymap_msgs/srv/GetMap"),
+        ("/polymap/leju/get_foothold", "polymap_msgs/srv/GetFoothold"),
+    ] {
+        assert!(polymap_has(name, "servers", ty), "polymap serving {name}: {}", graph[name]);
+    }
+    // The latched map announced as such (reliable, transient local, keep last 1).
+    let map_pubs = graph["/polymap/leju/map"]["publishers"].as_array().unwrap();
+    assert!(map_pubs.iter().any(|e| e["node"] == "polymap" && e["qos"] == ":1:,1:,:,:,,"), "{map_pubs:?}");
+
+    // Both services answer.
+    assert_eq!(v["map"]["frame_id"], "map", "{}", v["map"]);
+    assert!(v["map"]["treads"].as_u64().unwrap() >= 3, "{}", v["map"]);
+    assert_eq!(v["foothold"], serde_json::json!({"found": true, "contains": true, "label": 2}));
+
+    // The SDK's publisher was polymap's VINS: once its odometry flowed, every frame had a pose.
+    let (early, last) = (&v["status_early"], &v["status_last"]);
+    assert!(v["odometry_published"].as_u64().unwrap() >= 300, "{v}");
+    assert!(early["poses_accepted"].as_u64().unwrap() > 0, "{early}");
+    assert!(
+        last["processed"].as_u64().unwrap() >= early["processed"].as_u64().unwrap() + 10,
+        "frames mapped with the SDK's poses: {early} -> {last}"
+    );
+    assert_eq!(
+        last["without_pose"],
+        early["without_pose"],
+        "no frame without a pose once odometry flowed (the VINS held up [at, for] s: {}); polymap said:\n{}",
+        v["odometry_stalls"],
+        log.lines().filter(|l| l.contains("without pose")).collect::<Vec<_>>().join("\n")
+    );
+    assert_eq!(last["poses_refused"], 0, "{last}");
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn in_bridge_mode_polymap_announces_itself_as_zenoh_bridge_ros2dds_does() {
     let dir = tempfile::tempdir().unwrap();
@@ -285,4 +435,105 @@ fn depth_from_a_ros_2_topic_gives_the_sequence_s_polygons_frame_by_frame() {
     assert!(log.contains("but its camera_info says"), "{log}");
     let report = String::from_utf8_lossy(&report.stdout);
     assert!(report.contains("frames not extracted 2"), "{report}");
+}
+
+/// A ROS 2 follower on rmw_zenoh (tests/peer/ros2_follower.py: zenoh-ros2-sdk, rosbags,
+/// polymap_msgs' .msg files, the README's contract written out again), a peer of the mapper
+/// on `port`; `drop_every` > 0 loses every n-th update it receives, as a lossy link would.
+fn sdk_follower(dir: &Path, port: u16, name: &str, drop_every: u32) -> common::PeerFollower {
+    let mut cmd = Command::new(python());
+    cmd.arg(root().join("tests/peer/ros2_follower.py")).args([
+        "--port",
+        &port.to_string(),
+        "--name",
+        name,
+        "--drop-every",
+        &drop_every.to_string(),
+    ]);
+    common::PeerFollower::spawn(cmd, name, dir)
+}
+
+/// The mock VINS on the mapper's peer for `seconds`, waited for: then no frame has a pose
+/// and the map stops changing.
+fn vins_for(vins_config: &Path, seconds: u32) {
+    let status = Command::new(env!("CARGO_BIN_EXE_polymap"))
+        .args(["mock-vins", root().join("mock_frames/straight_320").to_str().unwrap(), "--rate", "100"])
+        .arg("--config")
+        .arg(vins_config)
+        .args(["--duration", &seconds.to_string()])
+        .stderr(std::process::Stdio::null())
+        .status()
+        .unwrap();
+    assert!(status.success(), "mock-vins: {status}");
+}
+
+/// Planners on ROS 2 that share nothing with polymap keep their own copy of the map from
+/// `map_updates` and the transient-local `map`, and each ends with get_map's map, polygon by
+/// polygon and field by field:
+/// - through a burst of changes (the camera at 30 Hz), one following every update and one
+///   losing every fourth (it notices the gaps and takes a whole map);
+/// - through a crash and restart of polymap (SIGKILL, a new run on the same port: a new
+///   epoch, the map built again from empty by a shorter walk): both reconnect by themselves
+///   and drop the old map for the new one;
+/// - and one that joins once the map is built.
+#[test]
+fn ros_2_followers_end_with_get_map_s_map_after_a_burst_a_restart_and_a_late_join() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_loopback_port().unwrap();
+    let seq = root().join("mock_frames/straight_320");
+    let start = |run: &str| {
+        let run_dir = dir.path().join(run);
+        std::fs::create_dir_all(&run_dir).unwrap();
+        common::start_mapper(&run_dir, &seq, port, 30, "", 900)
+    };
+    let (mut mapper, vins_config) = start("run1");
+    let mut follower = sdk_follower(dir.path(), port, "follower", 0);
+    let mut lossy = sdk_follower(dir.path(), port, "lossy_follower", 4);
+    let (joined, lossy_joined) = (follower.ready(), lossy.ready());
+    eprintln!("joined: {joined}\n        {lossy_joined}");
+
+    // A burst: 12 s of odometry with the camera at 30 Hz.
+    vins_for(&vins_config, 12);
+    follower.check("burst");
+    lossy.check("burst");
+    let (a, a_lossy) = (follower.checked(), lossy.checked());
+    eprintln!("after the burst: {a}\n                 {a_lossy}");
+    common::assert_holds_the_map(&a, "the follower after the burst");
+    common::assert_holds_the_map(&a_lossy, "the lossy follower after the burst");
+    assert!(a["version"].as_u64().unwrap() >= 10 && a["map_polygons"].as_u64().unwrap() >= 3, "a burst: {a}");
+    assert!(a["counters"]["applied"].as_u64().unwrap() >= 1, "the follower followed by the updates: {a}");
+    assert!(a_lossy["counters"]["dropped"].as_u64().unwrap() >= 1, "{a_lossy}");
+    assert!(a_lossy["counters"]["gaps"].as_u64().unwrap() >= 1, "the lossy follower saw its gaps: {a_lossy}");
+
+    // A crash and a restart on the same port: a new run (a new epoch) builds the map again
+    // from empty, with a shorter walk (fewer versions than the first run's).
+    let _ = mapper.kill();
+    let _ = mapper.wait();
+    let (mut mapper, vins_config) = start("run2");
+    vins_for(&vins_config, 6);
+    follower.check("restart");
+    lossy.check("restart");
+    let (b, b_lossy) = (follower.checked(), lossy.checked());
+    eprintln!("after the restart: {b}\n                   {b_lossy}");
+    for (check, who) in [(&b, "the follower"), (&b_lossy, "the lossy follower")] {
+        common::assert_holds_the_map(check, &format!("{who} after the restart"));
+        assert_ne!(check["epoch"], a["epoch"], "{who}: a new run: {check}");
+        assert_eq!(check["epochs"], serde_json::json!([a["epoch"], check["epoch"]]), "{who}: {check}");
+    }
+    assert!(b["map_polygons"].as_u64().unwrap() >= 3, "the new run mapped: {b}");
+
+    // A late joiner, once the map is built.
+    let mut late = sdk_follower(dir.path(), port, "late_follower", 0);
+    let late_joined = late.ready();
+    late.check("late");
+    let c = late.checked();
+    eprintln!("the late joiner: {late_joined}\n                 {c}");
+    common::assert_holds_the_map(&c, "the late joiner");
+    assert_eq!((&c["epoch"], &c["version"]), (&b["epoch"], &b["version"]), "{c}");
+    assert!(c["topic_maps"].as_u64().unwrap() >= 1, "the whole map from the transient-local `map` topic: {c}");
+    for f in [&mut follower, &mut lossy, &mut late] {
+        f.quit();
+    }
+    let _ = mapper.kill();
+    let _ = mapper.wait();
 }

@@ -206,3 +206,113 @@ pub fn frames_against_sequence(frames: &[serde_json::Value], seq: &polymap::sequ
     }
     (polygons, worst)
 }
+
+/// A follower of tests/peer (ros1_follower.py, ros2_follower.py): a planner's copy of the map
+/// kept from the message definitions and the README's contract alone. The test drives it on
+/// its stdin (`check LABEL`, `quit`) and reads its JSON lines; its stderr goes to
+/// `dir/<name>.stderr`. Killed when dropped.
+pub struct PeerFollower {
+    pub name: String,
+    child: Child,
+    stdin: std::process::ChildStdin,
+    lines: std::sync::mpsc::Receiver<serde_json::Value>,
+    stderr: PathBuf,
+}
+
+impl PeerFollower {
+    pub fn spawn(mut cmd: Command, name: &str, dir: &Path) -> PeerFollower {
+        use std::io::BufRead;
+        use std::process::Stdio;
+        let stderr = dir.join(format!("{name}.stderr"));
+        cmd.stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(std::fs::File::create(&stderr).unwrap());
+        let mut child = cmd.spawn().unwrap_or_else(|e| panic!("{name}: {e}"));
+        let stdout = child.stdout.take().unwrap();
+        let stdin = child.stdin.take().unwrap();
+        let (tx, lines) = std::sync::mpsc::channel();
+        let who = name.to_string();
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(stdout).lines() {
+                let Ok(line) = line else { break };
+                match serde_json::from_str::<serde_json::Value>(&line) {
+                    Ok(v) => {
+                        if tx.send(v).is_err() {
+                            break;
+                        }
+                    }
+                    Err(_) => eprintln!("{who}: {line}"),
+                }
+            }
+        });
+        PeerFollower { name: name.into(), child, stdin, lines, stderr }
+    }
+
+    fn send(&mut self, command: &str) {
+        use std::io::Write;
+        let sent = writeln!(self.stdin, "{command}").and_then(|_| self.stdin.flush());
+        if let Err(e) = sent {
+            panic!("{}: {command:?}: {e}; it said:\n{}", self.name, self.said());
+        }
+    }
+
+    fn said(&self) -> String {
+        std::fs::read_to_string(&self.stderr).unwrap_or_default()
+    }
+
+    /// Its next line that has `key`; `limit` bounds a hang only.
+    pub fn expect(&mut self, key: &str, limit: Duration) -> serde_json::Value {
+        let deadline = std::time::Instant::now() + limit;
+        loop {
+            match self.lines.recv_timeout(deadline.saturating_duration_since(std::time::Instant::now())) {
+                Ok(v) if v.get(key).is_some() => return v,
+                Ok(_) => {}
+                Err(e) => panic!(
+                    "{}: no {key:?} line within {limit:?} ({e}; exited: {:?}); it said:\n{}",
+                    self.name,
+                    self.child.try_wait(),
+                    self.said()
+                ),
+            }
+        }
+    }
+
+    /// Once it holds a map and get_map answered it.
+    pub fn ready(&mut self) -> serde_json::Value {
+        self.expect("ready", Duration::from_secs(120))
+    }
+
+    /// Asks it to compare its copy with get_map once the map stops changing; [`Self::checked`] reads the answer.
+    pub fn check(&mut self, label: &str) {
+        self.send(&format!("check {label}"));
+    }
+
+    pub fn checked(&mut self) -> serde_json::Value {
+        self.expect("check", Duration::from_secs(400))
+    }
+
+    pub fn quit(&mut self) -> serde_json::Value {
+        self.send("quit");
+        let bye = self.expect("bye", Duration::from_secs(60));
+        let deadline = std::time::Instant::now() + Duration::from_secs(20);
+        while std::time::Instant::now() < deadline && !matches!(self.child.try_wait(), Ok(Some(_))) {
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        bye
+    }
+}
+
+impl Drop for PeerFollower {
+    fn drop(&mut self) {
+        if !matches!(self.child.try_wait(), Ok(Some(_))) {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// A follower's check, held to the contract: it ended with get_map's map, exactly.
+pub fn assert_holds_the_map(check: &serde_json::Value, who: &str) {
+    assert_eq!(check["settled"], true, "{who}: the map settled: {check:#}");
+    assert_eq!(check["equal"], true, "{who}: its copy is get_map's map: {check:#}");
+    assert_eq!(check["held"], serde_json::json!([check["epoch"], check["version"]]), "{who}: {check:#}");
+    assert_eq!(check["polygons"], check["map_polygons"], "{who}: {check:#}");
+}

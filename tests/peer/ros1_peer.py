@@ -177,6 +177,24 @@ def main():
             status_early = status_now()
         time.sleep(0.003)
     status_during = status_now()
+
+    # A publisher whose connection breaks off while the master still lists it (VINS alive,
+    # its socket gone): polymap connects to it again and takes its poses on.
+    def accepted_now():
+        with lock:
+            st = streams[f"{NS}/status"].last
+        return None if st is None else st.poses_accepted
+    accepted_at_break, broken = accepted_now(), 0
+    for c in list(put.impl.connections):
+        c.close()
+        broken += 1
+    deadline = time.time() + 60.0
+    while time.time() < deadline and (accepted_now() or 0) < (accepted_at_break or 0) + 20:
+        for shown, p, q in schedule.due(time.time_ns()):
+            put.publish(odometry(shown, p, q))
+            published += 1
+        time.sleep(0.003)
+    reconnect = {"broken": broken, "accepted_at_break": accepted_at_break, "accepted_after": accepted_now()}
     stopped_at = time.time()
 
     # No more poses: no more frames mapped, so the map stops changing. A subscriber that
@@ -211,6 +229,7 @@ def main():
             "frame_polygons_frame": s[f"{NS}/frame_polygons"].last.header.frame_id if s[f"{NS}/frame_polygons"].last else None,
             "status_early": status_early,
             "status_during": status_during,
+            "reconnect": reconnect,
             "status": None if status is None else {
                 "processed": status.frames_processed, "without_pose": status.frames_without_pose,
                 "poses_accepted": status.poses_accepted, "poses_refused": status.poses_refused,
