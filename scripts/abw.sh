@@ -9,6 +9,10 @@ dir=${1:-../shared/real/abw}
 [ -d "$dir" ] || { echo "abw.sh: no ABW images at $dir" >&2; exit 2; }
 bin=${POLYMAP_BIN:-target/debug/polymap}
 [ -x "$bin" ] || cargo build --locked --bin polymap
+# The suite's last build of the binary links librealsense2 (--features realsense): its path.
+if [ -d target/pyenv ]; then
+    source scripts/librealsense.sh target/pyenv
+fi
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 "$bin" eval "$dir" --segmentation --json --config config/small-objects.toml > "$out/small.json"
