@@ -23,13 +23,17 @@ need_debs ros-core python3-rospy python3-rostopic python3-rosservice python3-ros
 # The Python peers: eclipse-zenoh and rosbags from PyPI in a virtualenv of our own, and
 # zenoh-ros2-sdk (robotis-git/zenoh_ros2_sdk), an rmw_zenoh client that shares no code with
 # polymap, as the independent ROS 2 node of tests/ros2_peer.rs.
+# Every package pinned in tests/peer/requirements.txt; the venv is made again when it changes.
 venv=target/pyenv
-if ! "$venv/bin/python" -c "import zenoh, rosbags, zenoh_ros2_sdk" >/dev/null 2>&1; then
-    echo "making $venv (eclipse-zenoh, rosbags, zenoh-ros2-sdk)"
+requirements=tests/peer/requirements.txt
+if ! cmp -s "$requirements" "$venv/requirements.txt"; then
+    echo "making $venv (eclipse-zenoh, rosbags, zenoh-ros2-sdk, as $requirements pins them)"
+    rm -rf "$venv"
     # Debian's own python (python3-venv above), not whatever python3 is first on PATH.
     py=/usr/bin/python3; [ -x "$py" ] || py=python3
     "$py" -m venv "$venv"
-    "$venv/bin/pip" install -q --disable-pip-version-check eclipse-zenoh==1.10.2 rosbags==0.11.9 zenoh-ros2-sdk==0.1.8
+    "$venv/bin/pip" install -q --disable-pip-version-check -r "$requirements"
+    cp "$requirements" "$venv/requirements.txt"
 fi
 export POLYMAP_PYTHON="$PWD/$venv/bin/python"
 

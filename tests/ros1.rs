@@ -881,61 +881,28 @@ fn ros1_vins_for(core: &Roscore, seconds: u32) {
 /// - and one that joins once the map is built.
 #[test]
 fn rospy_followers_end_with_get_map_s_map_after_a_burst_a_restart_and_a_late_join() {
-    let core = Roscore::start();
-    let dir = tempfile::tempdir().unwrap();
-    let start = |run: &str| {
-        let run_dir = dir.path().join(run);
-        std::fs::create_dir_all(&run_dir).unwrap();
-        let polymap = mapper(&core, &run_dir, 900, &burst_sources(), free_loopback_port().unwrap());
-        wait_for_node(&core, "/polymap", &run_dir.join("mapper.log"));
-        polymap
-    };
-    let mut polymap = start("run1");
-    let mut follower = rospy_follower(&core, dir.path(), "follower", 0);
-    let mut lossy = rospy_follower(&core, dir.path(), "lossy_follower", 4);
-    let (joined, lossy_joined) = (follower.ready(), lossy.ready());
-    eprintln!("joined: {joined}\n        {lossy_joined}");
-
-    // A burst: 12 s of odometry with the camera at 30 Hz.
-    ros1_vins_for(&core, 12);
-    follower.check("burst");
-    lossy.check("burst");
-    let (a, a_lossy) = (follower.checked(), lossy.checked());
-    eprintln!("after the burst: {a}\n                 {a_lossy}");
-    common::assert_holds_the_map(&a, "the follower after the burst");
-    common::assert_holds_the_map(&a_lossy, "the lossy follower after the burst");
-    assert!(a["version"].as_u64().unwrap() >= 10 && a["map_polygons"].as_u64().unwrap() >= 3, "a burst: {a}");
-    assert!(a["counters"]["applied"].as_u64().unwrap() >= 1, "the follower followed by the updates: {a}");
-    assert!(a_lossy["counters"]["dropped"].as_u64().unwrap() >= 1, "{a_lossy}");
-    assert!(a_lossy["counters"]["gaps"].as_u64().unwrap() >= 1, "the lossy follower saw its gaps: {a_lossy}");
-
-    // A restart: a new run (a new epoch) builds the map again from empty, with a shorter walk
-    // (fewer versions than the first run's).
-    stop(&mut polymap);
-    let mut polymap = start("run2");
-    ros1_vins_for(&core, 6);
-    follower.check("restart");
-    lossy.check("restart");
-    let (b, b_lossy) = (follower.checked(), lossy.checked());
-    eprintln!("after the restart: {b}\n                   {b_lossy}");
-    for (check, who) in [(&b, "the follower"), (&b_lossy, "the lossy follower")] {
-        common::assert_holds_the_map(check, &format!("{who} after the restart"));
-        assert_ne!(check["epoch"], a["epoch"], "{who}: a new run: {check}");
-        assert_eq!(check["epochs"], serde_json::json!([a["epoch"], check["epoch"]]), "{who}: {check}");
+    struct Rospy {
+        core: Roscore,
+        dir: tempfile::TempDir,
+        polymap: Option<Child>,
     }
-    assert!(b["map_polygons"].as_u64().unwrap() >= 3, "the new run mapped: {b}");
-
-    // A late joiner, once the map is built.
-    let mut late = rospy_follower(&core, dir.path(), "late_follower", 0);
-    let late_joined = late.ready();
-    late.check("late");
-    let c = late.checked();
-    eprintln!("the late joiner: {late_joined}\n                 {c}");
-    common::assert_holds_the_map(&c, "the late joiner");
-    assert_eq!((&c["epoch"], &c["version"]), (&b["epoch"], &b["version"]), "{c}");
-    assert!(c["topic_maps"].as_u64().unwrap() >= 1, "the whole map from the latched `map` topic: {c}");
-    for f in [&mut follower, &mut lossy, &mut late] {
-        f.quit();
+    impl common::FollowerRig for Rospy {
+        fn start(&mut self, run: &str) {
+            let run_dir = self.dir.path().join(run);
+            std::fs::create_dir_all(&run_dir).unwrap();
+            self.polymap = Some(mapper(&self.core, &run_dir, 900, &burst_sources(), free_loopback_port().unwrap()));
+            wait_for_node(&self.core, "/polymap", &run_dir.join("mapper.log"));
+        }
+        fn stop(&mut self) {
+            stop(self.polymap.as_mut().unwrap());
+        }
+        fn walk(&mut self, seconds: u32) {
+            ros1_vins_for(&self.core, seconds);
+        }
+        fn follower(&mut self, name: &str, drop_every: u32) -> common::PeerFollower {
+            rospy_follower(&self.core, self.dir.path(), name, drop_every)
+        }
     }
-    stop(&mut polymap);
+    let mut rig = Rospy { core: Roscore::start(), dir: tempfile::tempdir().unwrap(), polymap: None };
+    common::followers_end_with_get_map(&mut rig, "latched");
 }

@@ -25,6 +25,9 @@ use polymap::pose::RawPose;
 use polymap::ros2::graph::Endpoint;
 use polymap::ros2::msg::{Foothold, GetFoothold, GetFootholdRequest, GetFootholdResponse, Point};
 use polymap::ros2::{Node, NodeOptions, RosName, cdr};
+mod common;
+use common::wait_for_listener;
+
 use rcgen::{
     BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, KeyPair, KeyUsagePurpose, SanType,
 };
@@ -75,15 +78,6 @@ fn shipped(name: &str, as_name: &str, tls: &Path, port: u16) -> std::path::PathB
     let path = tls.join(format!("{as_name}.json5"));
     std::fs::write(&path, text).unwrap();
     path
-}
-
-/// Blocks until something accepts TCP connections on loopback port `port`.
-fn wait_for_listener(port: u16, within: Duration) {
-    let started = std::time::Instant::now();
-    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-        assert!(started.elapsed() < within, "nothing listens on port {port} after {within:?}");
-        std::thread::sleep(Duration::from_millis(50));
-    }
 }
 
 async fn open(config: &Path) -> Result<zenoh::Session, polymap::ros2::Ros2Error> {

@@ -216,6 +216,17 @@ class Peer:
             entities.append(entity)
         return entities
 
+    def wait_for(self, kind, name, timeout=60.0):
+        """Blocks until another node has an entity of `kind` (MS: subscription, MP: publisher,
+        SS: service) on `name` in the graph; raises TimeoutError after `timeout` s."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if any(e["kind"] == kind and e.get("name") == name and e["zid"] != self.zid
+                   for e in self.graph(timeout=1.0)):
+                return
+            time.sleep(0.05)
+        raise TimeoutError(f"no {kind} on {name} within {timeout} s")
+
     def msg(self, typename):
         """A message class of the store, to build messages to send."""
         return self.store.types[typename]

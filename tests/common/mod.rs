@@ -316,3 +316,80 @@ pub fn assert_holds_the_map(check: &serde_json::Value, who: &str) {
     assert_eq!(check["held"], serde_json::json!([check["epoch"], check["version"]]), "{who}: {check:#}");
     assert_eq!(check["polygons"], check["map_polygons"], "{who}: {check:#}");
 }
+
+/// Blocks until something accepts TCP connections on loopback port `port`; fails only on a hang.
+pub fn wait_for_listener(port: u16, within: Duration) {
+    let started = std::time::Instant::now();
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(started.elapsed() < within, "nothing listens on port {port} after {within:?}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// What a follower scenario needs of one transport: polymap started and stopped, a walk of
+/// the mock VINS, and a follower that shares no code with polymap.
+pub trait FollowerRig {
+    /// Starts a run of polymap (a new epoch) in `run`, ready for followers.
+    fn start(&mut self, run: &str);
+    /// Ends the current run.
+    fn stop(&mut self);
+    /// The mock VINS walking for `seconds`, waited for: then the map stops changing.
+    fn walk(&mut self, seconds: u32);
+    /// A follower node `name`; `drop_every` > 0 loses every n-th update, as a lossy link would.
+    fn follower(&mut self, name: &str, drop_every: u32) -> PeerFollower;
+}
+
+/// The contract's scenario, the same on every transport: a burst of changes (one follower
+/// taking every update, one losing every fourth), a restart of polymap (a new epoch, a shorter
+/// walk), and a late joiner; each follower ends with get_map's map. `latched` names the
+/// whole-map topic's kind in messages.
+pub fn followers_end_with_get_map(rig: &mut impl FollowerRig, latched: &str) {
+    rig.start("run1");
+    let mut follower = rig.follower("follower", 0);
+    let mut lossy = rig.follower("lossy_follower", 4);
+    let (joined, lossy_joined) = (follower.ready(), lossy.ready());
+    eprintln!("joined: {joined}\n        {lossy_joined}");
+
+    // A burst: 12 s of odometry with the camera at 30 Hz.
+    rig.walk(12);
+    follower.check("burst");
+    lossy.check("burst");
+    let (a, a_lossy) = (follower.checked(), lossy.checked());
+    eprintln!("after the burst: {a}\n                 {a_lossy}");
+    assert_holds_the_map(&a, "the follower after the burst");
+    assert_holds_the_map(&a_lossy, "the lossy follower after the burst");
+    assert!(a["version"].as_u64().unwrap() >= 10 && a["map_polygons"].as_u64().unwrap() >= 3, "a burst: {a}");
+    assert!(a["counters"]["applied"].as_u64().unwrap() >= 1, "the follower followed by the updates: {a}");
+    assert!(a_lossy["counters"]["dropped"].as_u64().unwrap() >= 1, "{a_lossy}");
+    assert!(a_lossy["counters"]["gaps"].as_u64().unwrap() >= 1, "the lossy follower saw its gaps: {a_lossy}");
+
+    // A restart: a new run (a new epoch) builds the map again from empty, with a shorter walk
+    // (fewer versions than the first run's).
+    rig.stop();
+    rig.start("run2");
+    rig.walk(6);
+    follower.check("restart");
+    lossy.check("restart");
+    let (b, b_lossy) = (follower.checked(), lossy.checked());
+    eprintln!("after the restart: {b}\n                   {b_lossy}");
+    for (check, who) in [(&b, "the follower"), (&b_lossy, "the lossy follower")] {
+        assert_holds_the_map(check, &format!("{who} after the restart"));
+        assert_ne!(check["epoch"], a["epoch"], "{who}: a new run: {check}");
+        assert_eq!(check["epochs"], serde_json::json!([a["epoch"], check["epoch"]]), "{who}: {check}");
+    }
+    assert!(b["map_polygons"].as_u64().unwrap() >= 3, "the new run mapped: {b}");
+
+    // A late joiner, once the map is built.
+    let mut late = rig.follower("late_follower", 0);
+    let late_joined = late.ready();
+    late.check("late");
+    let c = late.checked();
+    eprintln!("the late joiner: {late_joined}\n                 {c}");
+    assert_holds_the_map(&c, "the late joiner");
+    assert_eq!((&c["epoch"], &c["version"]), (&b["epoch"], &b["version"]), "{c}");
+    assert!(c["topic_maps"].as_u64().unwrap() >= 1, "the whole map from the {latched} `map` topic: {c}");
+    for f in [&mut follower, &mut lossy, &mut late] {
+        f.quit();
+    }
+    rig.stop();
+}

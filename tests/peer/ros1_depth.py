@@ -52,7 +52,12 @@ def main():
     image_pub = rospy.Publisher("/l515/depth/image_rect_raw", Image, queue_size=10)
     info_pub = rospy.Publisher("/l515/depth/camera_info", CameraInfo, queue_size=10)
     odom_pub = rospy.Publisher("/vins_estimator/odometry", Odometry, queue_size=100)
-    time.sleep(2.0)  # the master tells polymap of these publishers
+    # Ready once polymap has connected to each publisher and to each subscriber's topic.
+    deadline = time.time() + 60.0
+    while time.time() < deadline and min(e.get_num_connections() for e in subs + [image_pub, info_pub, odom_pub]) == 0:
+        time.sleep(0.05)
+    if min(e.get_num_connections() for e in subs + [image_pub, info_pub, odom_pub]) == 0:
+        sys.exit("polymap never connected to the depth peer's topics")
 
     def info(stamp, width, height):
         m = CameraInfo()

@@ -148,7 +148,12 @@ def main():
 
     subs = [rospy.Subscriber(name, ty, taker(name), queue_size=100) for name, ty in TOPICS.items()]
     put = rospy.Publisher("/vins_estimator/odometry", Odometry, queue_size=100)
-    time.sleep(1.5)  # the master tells polymap of this publisher
+    # Ready once polymap has connected to the odometry publisher.
+    deadline = time.time() + 60.0
+    while time.time() < deadline and put.get_num_connections() == 0:
+        time.sleep(0.05)
+    if put.get_num_connections() == 0:
+        sys.exit("polymap never connected to the peer's odometry")
 
     # Absurd poses first: not finite, far beyond any radius, not a rotation, an hour ahead.
     now = time.time_ns()

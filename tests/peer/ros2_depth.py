@@ -59,7 +59,11 @@ def main():
         put_image = peer.publisher("/l515/depth/image_rect_raw", "sensor_msgs/msg/Image")
         put_info = peer.publisher("/l515/depth/camera_info", "sensor_msgs/msg/CameraInfo")
         put_odometry = peer.publisher("/odometry", "nav_msgs/msg/Odometry", qos="::,100:,:,:,,")
-        time.sleep(2.0)  # polymap learns of these publishers
+        # Ready once polymap's subscriptions and publishers are in the graph.
+        for kind, name in [("MS", "/l515/depth/image_rect_raw"), ("MS", "/l515/depth/camera_info"),
+                           ("MS", "/odometry"), ("MP", f"{args.namespace}/frame_polygons"),
+                           ("MP", f"{args.namespace}/map_updates")]:
+            peer.wait_for(kind, name)
 
         def info(stamp, width, height):
             return msgs.camera_info(m, stamp, FRAME, cam, width, height)
